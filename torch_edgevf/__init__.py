@@ -1,0 +1,42 @@
+"""torch_edgevf: tangent vector fields on triangle meshes, one complex number per edge.
+
+The representation and every operator follow "Tangent Vector Fields on Triangulated
+Surfaces: An Edge-Based Approach" (see README for the citations): the value of a field at
+each edge midpoint, in a frame along the edge from its lower to its higher vertex index,
+interpolated inside faces with the Crouzeix-Raviart (mid-edge) hat basis.
+"""
+
+from . import geometry, meshes, operators
+from .geometry import (
+    FaceGeometry,
+    angle_defects,
+    corner_angles,
+    dihedral_angles,
+    edge_lengths,
+    face_areas,
+    face_geometry,
+    face_normals,
+    transport_coefficients,
+    vertex_normals,
+)
+from .meshes import icosphere
+from .module import EdgeOperators
+from .operators import (
+    connection_laplacian,
+    cotan_laplacian,
+    covariant_derivative,
+    curl_div_operator,
+    curl_energy,
+    div_energy,
+    face_curl,
+    face_div,
+    gradient,
+    laplace_beltrami,
+    mass_matrix,
+    real_form,
+    vertex_div_curl,
+    vertex_mass,
+)
+from .topology import Topology, remove_unreferenced_vertices
+
+__version__ = "0.1.0"

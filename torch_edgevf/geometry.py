@@ -1,0 +1,265 @@
+"""Differentiable mesh geometry in pure torch.
+
+Everything here is a function of the vertex positions, so gradients flow back to them;
+dtype and device follow ``verts``. The operators of :mod:`torch_edgevf.operators` depend
+only on the intrinsic per-face quantities gathered in :class:`FaceGeometry` (edge lengths,
+twice the area, and the corner dot products ``d_k = |e_a||e_b| cos(alpha_k)``), which can
+be built from positions (:func:`face_geometry`) or from edge lengths alone
+(:meth:`FaceGeometry.from_lengths`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ._validation import as_faces, as_verts, check_vertex_count, list_some
+from .topology import Topology
+
+__all__ = [
+    "FaceGeometry",
+    "face_geometry",
+    "edge_lengths",
+    "face_areas",
+    "corner_angles",
+    "transport_coefficients",
+    "dihedral_angles",
+    "angle_defects",
+    "face_normals",
+    "vertex_normals",
+    "mean_edge_length",
+]
+
+# The 9 ordered corner pairs (a, b) of a face, in row-major order; for a != b, c is the
+# third corner and sigma = +1 when b follows a counter-clockwise.
+PAIR_A = np.repeat(np.arange(3), 3)
+PAIR_B = np.tile(np.arange(3), 3)
+PAIR_C = np.where(PAIR_A == PAIR_B, PAIR_A, 3 - PAIR_A - PAIR_B)
+PAIR_SIGMA = np.where(PAIR_B == (PAIR_A + 1) % 3, 1.0, np.where(PAIR_A == PAIR_B, 0.0, -1.0))
+OFF_DIAGONAL = PAIR_A != PAIR_B
+
+
+@dataclass
+class FaceGeometry:
+    """Intrinsic per-face quantities; the operators are written on these alone.
+
+    Attributes
+    ----------
+    lengths : (F, 3) tensor
+        ``lengths[f, k]`` is the length of the edge opposite corner ``k``.
+    double_area : (F,) tensor
+        ``2 A_f``.
+    dots : (F, 3) tensor
+        ``dots[f, k] = |e_{k+1}| |e_{k+2}| cos(alpha_k)``, the dot product of the two edge
+        vectors leaving corner ``k``.
+    """
+
+    lengths: torch.Tensor
+    double_area: torch.Tensor
+    dots: torch.Tensor
+
+    @property
+    def area(self) -> torch.Tensor:
+        return 0.5 * self.double_area
+
+    @property
+    def angles(self) -> torch.Tensor:
+        """(F, 3) interior corner angles ``alpha_k`` in ``(0, pi)``."""
+        return torch.atan2(self.double_area[:, None].expand_as(self.dots), self.dots)
+
+    @property
+    def cotangents(self) -> torch.Tensor:
+        """(F, 3) ``cot(alpha_k) = d_k / (2A)``."""
+        return self.dots / self.double_area[:, None]
+
+    @classmethod
+    def from_lengths(cls, lengths: torch.Tensor) -> "FaceGeometry":
+        """Build from edge lengths alone (intrinsic meshes).
+
+        The area uses Kahan's cancellation-free form of Heron's formula.
+
+        Parameters
+        ----------
+        lengths : (F, 3) tensor, ``lengths[f, k]`` opposite corner ``k``.
+        """
+        if lengths.dim() != 2 or lengths.shape[1] != 3:
+            raise ValueError(f"lengths must have shape (F, 3), got {tuple(lengths.shape)}")
+        sq = lengths * lengths
+        dots = 0.5 * (sq[:, [1, 2, 0]] + sq[:, [2, 0, 1]] - sq)
+        a, b, c = torch.sort(lengths, dim=1, descending=True).values.unbind(1)
+        prod = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
+        bad = torch.nonzero(prod.detach() <= 0).flatten().tolist()
+        if bad:
+            raise ValueError(
+                f"edge lengths violate the strict triangle inequality (zero-area faces) "
+                f"at faces [{list_some(bad)}]"
+            )
+        return _checked(cls(lengths, 0.5 * torch.sqrt(prod), dots))
+
+
+def _checked(geom: FaceGeometry) -> FaceGeometry:
+    """Reject faces whose area is zero relative to their longest edge."""
+    eps = torch.finfo(geom.double_area.dtype).eps
+    lmax = geom.lengths.detach().max(dim=1).values
+    bad = torch.nonzero(geom.double_area.detach() <= 8 * eps * lmax * lmax).flatten().tolist()
+    if bad:
+        raise ValueError(f"zero-area (degenerate) faces at faces [{list_some(bad)}]")
+    return geom
+
+
+def face_geometry(verts, faces) -> FaceGeometry:
+    """Per-face lengths, doubled areas and corner dot products from vertex positions.
+
+    Parameters
+    ----------
+    verts : (V, 3) floating tensor
+    faces : (F, 3) integer tensor, or a :class:`Topology`
+
+    Raises
+    ------
+    ValueError
+        On NaN/Inf coordinates or zero-area faces, naming them.
+    """
+    faces = faces.faces if isinstance(faces, Topology) else as_faces(faces)
+    verts = as_verts(verts)
+    faces = faces.to(verts.device)
+    if int(faces.max()) >= verts.shape[0]:
+        raise ValueError(f"faces reference vertex {int(faces.max())} but verts has {verts.shape[0]} rows")
+    p = verts[faces]  # (F, 3, 3)
+    # edge_vec[:, k] runs from corner k+1 to corner k+2 (the edge opposite corner k)
+    edge_vec = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]
+    lengths = torch.linalg.vector_norm(edge_vec, dim=-1)
+    double_area = torch.linalg.vector_norm(torch.linalg.cross(edge_vec[:, 0], edge_vec[:, 1]), dim=-1)
+    # vectors leaving corner k: towards k+1 is -edge_vec[k+2], towards k+2 is edge_vec[k+1]
+    dots = -(edge_vec[:, [2, 0, 1]] * edge_vec[:, [1, 2, 0]]).sum(-1)
+    return _checked(FaceGeometry(lengths, double_area, dots))
+
+
+def _topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
+    if not isinstance(topo, Topology):
+        topo = Topology(topo, num_vertices=None if not hasattr(verts, "shape") else verts.shape[0])
+    verts = as_verts(verts)
+    check_vertex_count(verts, topo.num_vertices)
+    return verts, topo
+
+
+def edge_lengths(verts, topo) -> torch.Tensor:
+    """(E,) edge lengths ``|v_j - v_i|`` in the order of ``topo.edges``."""
+    verts, topo = _topology_and_verts(verts, topo)
+    e = topo.edges.to(verts.device)
+    return torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
+
+
+def mean_edge_length(verts, topo) -> torch.Tensor:
+    """Scalar mean edge length ``h``."""
+    return edge_lengths(verts, topo).mean()
+
+
+def face_areas(verts, faces) -> torch.Tensor:
+    """(F,) triangle areas."""
+    return face_geometry(verts, faces).area
+
+
+def corner_angles(verts, faces) -> torch.Tensor:
+    """(F, 3) interior angles, ``[f, k]`` at corner ``k``."""
+    return face_geometry(verts, faces).angles
+
+
+def face_normals(verts, faces) -> torch.Tensor:
+    """(F, 3) unit normals, oriented by the counter-clockwise order of the faces."""
+    faces = faces.faces if isinstance(faces, Topology) else as_faces(faces)
+    verts = as_verts(verts)
+    face_geometry(verts, faces)  # validates (zero-area faces have no normal)
+    p = verts[faces.to(verts.device)]
+    n = torch.linalg.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    return n / torch.linalg.vector_norm(n, dim=-1, keepdim=True)
+
+
+def vertex_normals(verts, topo) -> torch.Tensor:
+    """(V, 3) angle-weighted unit vertex normals (zero rows at unreferenced vertices)."""
+    verts, topo = _topology_and_verts(verts, topo)
+    geom = face_geometry(verts, topo)
+    nf = face_normals(verts, topo)
+    faces = topo.faces.to(verts.device)
+    acc = verts.new_zeros(verts.shape).index_add(
+        0, faces.flatten(), (geom.angles[:, :, None] * nf[:, None, :]).reshape(-1, 3)
+    )
+    norm = torch.linalg.vector_norm(acc, dim=-1, keepdim=True)
+    return acc / torch.where(norm > 0, norm, torch.ones_like(norm))
+
+
+def transport_coefficients(verts, topo, n: int = 1, geom: FaceGeometry | None = None) -> torch.Tensor:
+    """Transport coefficients between the edge frames of each face (thesis 2.3).
+
+    .. math::  r_{ab} = -\\delta_a \\delta_b e^{\\imath \\sigma_{ab} \\alpha_c}, \\quad r_{aa} = 1,
+
+    where ``c`` is the third corner and ``sigma_ab = +1`` when ``b`` follows ``a``
+    counter-clockwise (``-1`` otherwise), so that ``r_ba = conj(r_ab)``. ``r_ab`` converts a
+    coefficient in the frame of the edge opposite corner ``a`` into the frame of the edge
+    opposite corner ``b``.
+
+    Returns
+    -------
+    (F, 3, 3) complex tensor ``r[f, a, b] ** n``.
+    """
+    verts, topo = _topology_and_verts(verts, topo)
+    geom = face_geometry(verts, topo) if geom is None else geom
+    return pair_transport(geom, topo.face_edge_signs.to(verts.device), n).reshape(-1, 3, 3)
+
+
+def pair_transport(geom: FaceGeometry, signs: torch.Tensor, n: int = 1) -> torch.Tensor:
+    """(F, 9) ``r_ab ** n`` for the 9 ordered corner pairs (row-major ``3a + b``)."""
+    angles = geom.angles
+    dev = angles.device
+    c = torch.as_tensor(PAIR_C, device=dev)
+    sigma = torch.as_tensor(PAIR_SIGMA, dtype=angles.dtype, device=dev)
+    s = signs.to(angles.dtype)
+    sign = -s[:, PAIR_A] * s[:, PAIR_B]
+    off = torch.as_tensor(OFF_DIAGONAL, device=dev)
+    sign = torch.where(off, sign, torch.ones_like(sign)) ** n
+    phase = n * sigma * angles[:, c]
+    return torch.polar(torch.ones_like(phase), phase) * sign
+
+
+def dihedral_angles(verts, topo) -> torch.Tensor:
+    """(E,) signed dihedral angles, positive on convex edges, 0 on boundary edges.
+
+    For ``e = (i, j)`` with left face ``f_L`` (where the edge runs ``i -> j``), right face
+    ``f_R`` and unit edge vector ``t``,
+
+    .. math::  \\beta_e = \\operatorname{atan2}(t \\cdot (n_L \\times n_R), n_L \\cdot n_R).
+    """
+    verts, topo = _topology_and_verts(verts, topo)
+    nf = face_normals(verts, topo)
+    ef = topo.edge_faces.to(verts.device)
+    interior = (ef >= 0).all(dim=1)
+    e = topo.edges.to(verts.device)[interior]
+    t = verts[e[:, 1]] - verts[e[:, 0]]
+    t = t / torch.linalg.vector_norm(t, dim=-1, keepdim=True)
+    nl, nr = nf[ef[interior, 0]], nf[ef[interior, 1]]
+    beta = torch.atan2((t * torch.linalg.cross(nl, nr)).sum(-1), (nl * nr).sum(-1))
+    out = verts.new_zeros(topo.num_edges)
+    return out.index_put((torch.nonzero(interior).flatten(),), beta)
+
+
+def angle_defects(verts, topo) -> torch.Tensor:
+    """(V,) angle defects: ``2 pi - sum(alpha)`` inside, ``pi - sum(alpha)`` on the boundary.
+
+    Unreferenced vertices get 0. On a closed mesh the sum is ``2 pi chi`` (Gauss-Bonnet).
+    """
+    verts, topo = _topology_and_verts(verts, topo)
+    geom = face_geometry(verts, topo)
+    faces = topo.faces.to(verts.device)
+    total = verts.new_zeros(topo.num_vertices).index_add(0, faces.flatten(), geom.angles.flatten())
+    full = torch.where(
+        topo.boundary_vertices.to(verts.device),
+        torch.full_like(total, math.pi),
+        torch.full_like(total, 2 * math.pi),
+    )
+    defect = full - total
+    if topo.unreferenced_vertices.numel():
+        defect = defect.index_fill(0, topo.unreferenced_vertices.to(verts.device), 0.0)
+    return defect

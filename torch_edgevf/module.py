@@ -1,0 +1,158 @@
+"""``EdgeOperators``: every operator of a mesh, held as buffers of an ``nn.Module``."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from . import operators as ops
+from ._validation import as_verts, check_vertex_count
+from .geometry import face_geometry
+from .topology import Topology
+
+__all__ = ["EdgeOperators"]
+
+_COMPLEX_OF = {torch.float32: torch.complex64, torch.float64: torch.complex128}
+_REAL_OF = {torch.complex64: torch.float32, torch.complex128: torch.float64}
+
+
+class EdgeOperators(nn.Module):
+    """The edge-based operators of one mesh, as torch sparse COO buffers.
+
+    The topology (and every sparsity pattern) is computed once; :meth:`update` re-assembles
+    the operators for new vertex positions with a gather and a scatter. Built from a
+    ``verts`` that requires grad, the buffers carry the autograd graph back to it: call
+    :meth:`update` again in each optimisation step.
+
+    Parameters
+    ----------
+    verts : (V, 3) float32 or float64 tensor
+    faces : (F, 3) integer tensor, or a :class:`Topology`
+    n : int
+        Symmetry order of :attr:`connection_laplacian` (``n = 0``: scalar CR Laplacian).
+
+    Attributes
+    ----------
+    edges : (E, 2) int64, ``i < j``, lexicographic
+    faces : (F, 3) int64
+    verts : (V, 3)
+    mass : (E, E) real diagonal ``M_z``
+    connection_laplacian : (E, E) ``L_c^(n)`` (complex for ``n >= 1``)
+    gradient : (E, V) complex ``G``
+    curl_div : (F, E) real ``K``
+    laplace_beltrami : (V, V) real ``L = G^* M_z^{-1} G``
+    vertex_mass : (V, V) real full FEM mass
+    lumped_vertex_mass : (V, V) real diagonal
+    face_area : (F,)
+    edge_length : (E,)
+
+    Notes
+    -----
+    ``.to(dtype)``, ``.float()`` and ``.double()`` convert real buffers to the dtype and
+    complex buffers to the matching complex dtype (``nn.Module.to(torch.float32)`` alone
+    would drop their imaginary parts).
+    """
+
+    def __init__(self, verts, faces, n: int = 1):
+        super().__init__()
+        verts = as_verts(verts)
+        topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
+        check_vertex_count(verts, topo.num_vertices)
+        if not isinstance(n, int) or isinstance(n, bool) or n < 0:
+            raise ValueError(f"n must be an integer >= 0, got {n!r}")
+        self.topology = topo
+        self.n = n
+        self.register_buffer("faces", topo.faces.to(verts.device))
+        self.register_buffer("edges", topo.edges.to(verts.device))
+        for name in ("verts", "mass", "connection_laplacian", "gradient", "curl_div", "laplace_beltrami",
+                     "vertex_mass", "lumped_vertex_mass", "face_area", "edge_length"):
+            self.register_buffer(name, None)
+        self.update(verts)
+
+    def update(self, verts) -> "EdgeOperators":
+        """Re-assemble every operator for new positions of the same mesh."""
+        verts = as_verts(verts)
+        topo = self.topology
+        check_vertex_count(verts, topo.num_vertices)
+        geom = face_geometry(verts, topo)
+        signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
+        mass_values = ops._mass_values(geom, topo)
+        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
+        e = self.edges.to(verts.device)
+        self.verts = verts
+        self.mass = ops.diagonal(mass_values)
+        self.connection_laplacian = ops._pattern(topo, "EE").assemble(
+            ops._connection_laplacian_values(geom, signs, self.n)
+        )
+        self.gradient = gradient
+        self.curl_div = ops._pattern(topo, "FE").assemble(ops._curl_values(geom, signs))
+        self.laplace_beltrami = ops._laplace_beltrami_from(gradient.values(), mass_values, topo)
+        self.vertex_mass = ops._vertex_mass_from(geom, topo, lumped=False)
+        self.lumped_vertex_mass = ops._vertex_mass_from(geom, topo, lumped=True)
+        self.face_area = geom.area
+        self.edge_length = torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
+        return self
+
+    @property
+    def num_edges(self) -> int:
+        return self.topology.num_edges
+
+    @property
+    def num_vertices(self) -> int:
+        return self.topology.num_vertices
+
+    @property
+    def num_faces(self) -> int:
+        return self.topology.num_faces
+
+    def connection_laplacian_n(self, n: int) -> torch.Tensor:
+        """``L_c`` for another symmetry order ``n`` (the held one is :attr:`connection_laplacian`)."""
+        return ops.connection_laplacian(self.verts, self.topology, n)
+
+    def covariant_derivative(self, w) -> torch.Tensor:
+        """``D_w``, ``(E, E)`` complex, for an edge field ``w`` ``(E,)`` (thesis 5.1)."""
+        return ops.covariant_derivative(self.verts, self.topology, w)
+
+    def curl_energy(self) -> torch.Tensor:
+        """``(2E, 2E)`` ``L_curl`` (thesis 3.3)."""
+        return ops.curl_energy(self.verts, self.topology)
+
+    def div_energy(self) -> torch.Tensor:
+        """``(2E, 2E)`` ``L_div`` (thesis 3.3)."""
+        return ops.div_energy(self.verts, self.topology)
+
+    def cotan_laplacian(self) -> torch.Tensor:
+        """``(V, V)`` cotangent Laplacian (PSD stiffness), for comparison."""
+        return ops.cotan_laplacian(self.verts, self.topology)
+
+    def extra_repr(self) -> str:
+        dtype = self.verts.dtype if self.verts is not None else None
+        return (
+            f"V={self.num_vertices}, E={self.num_edges}, F={self.num_faces}, n={self.n}, "
+            f"dtype={dtype}, device={self.faces.device}"
+        )
+
+    # dtype conversions that keep complex buffers complex
+    def to(self, *args, **kwargs):
+        device, dtype, non_blocking, _ = torch._C._nn._parse_to(*args, **kwargs)
+        if dtype is not None and not (dtype.is_floating_point or dtype.is_complex):
+            raise ValueError(f"EdgeOperators can only be converted to a floating dtype, got {dtype}")
+        real = _REAL_OF.get(dtype, dtype) if dtype is not None else None
+        if real is not None and real not in _COMPLEX_OF:
+            raise ValueError(f"EdgeOperators supports float32 and float64, got {dtype}")
+
+        def convert(t):
+            target = None
+            if real is not None and t.is_complex():
+                target = _COMPLEX_OF[real]
+            elif real is not None and t.is_floating_point():
+                target = real
+            return t.to(device=device, dtype=target, non_blocking=non_blocking)
+
+        return self._apply(convert)
+
+    def float(self):
+        return self.to(torch.float32)
+
+    def double(self):
+        return self.to(torch.float64)
