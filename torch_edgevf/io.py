@@ -1,0 +1,619 @@
+"""Reading and writing triangle meshes and edge-based tangent fields.
+
+Meshes
+    :func:`load_mesh` reads OBJ, PLY, OFF and STL through trimesh with
+    ``process=False`` (trimesh neither merges, reorders, drops faces nor fixes
+    winding), then does its own documented clean-up and records every change in a
+    :class:`MeshReport`:
+
+    1. a scene of several geometries is concatenated (in scene-graph order);
+    2. vertices with bitwise-identical positions are merged (``merge=True``);
+       files that store per-corner normals or texture coordinates come back from
+       trimesh split into disconnected triangles, and STL never shares vertices;
+    3. faces with a repeated vertex index are dropped, then repeated faces (same
+       three vertices in any order) keeping the first;
+    4. unreferenced vertices are dropped.
+
+    Merging is exact rather than within a tolerance: seam copies of one vertex
+    carry the same coordinates, while a tolerance could fuse distinct vertices.
+    Positions are never rounded or moved; kept vertices stay in first-occurrence
+    order (for the meshes tested this is the order of the file's ``v`` lines).
+    Polygons are triangulated by trimesh; the report shows the face counts of the
+    file next to the triangle counts.
+
+    :func:`save_mesh` writes OBJ, OFF (``%.17g`` text) and PLY (binary float64)
+    itself, because trimesh writes OBJ and OFF with a fixed number of decimals and
+    PLY in float32; STL goes through trimesh and is float32 by definition.
+
+Fields
+    :func:`save_field` / :func:`load_field` store a mesh with a complex field on
+    its edges, ``z`` of shape ``(E,)`` or ``(E, C)``, and the symmetry order ``n``.
+    Edges are the unique pairs ``(i, j)``, ``i < j``, of the faces in lexicographic
+    order (:func:`edges_from_faces`). ``.npz`` (``np.savez``, no pickles) is
+    bit-exact; ``.txt`` is a plain interchange format::
+
+        edgevf_field version=1 V=<V> F=<F> E=<E> C=<C> n=<n> dims=<1|2>
+        x y z                      (V lines)
+        a b c                      (F lines, 0-based)
+        i j re_1 im_1 ... re_C im_C   (E lines, i < j)
+
+    with floats written as ``%.17g`` (exact round trip). ``dims`` tells whether
+    ``z`` was ``(E,)`` or ``(E, C)``. The edge lines of a ``.txt`` file may come in
+    any order (they are matched by their endpoints); those of ``.npz`` must be in
+    ours.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import zipfile
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "MeshData",
+    "MeshReport",
+    "FieldData",
+    "load_mesh",
+    "save_mesh",
+    "default_mesh",
+    "save_field",
+    "load_field",
+    "edges_from_faces",
+]
+
+MESH_FORMATS = ("obj", "ply", "off", "stl")
+FIELD_FORMAT_VERSION = 1
+_FIELD_KEYS = ("verts", "faces", "edges", "z", "n", "version")
+_DEFAULT_MESH = "spot_low_resolution.obj"
+
+
+# ----------------------------------------------------------------------------- meshes
+
+
+@dataclass
+class MeshReport:
+    """What :func:`load_mesh` read and changed.
+
+    ``file_vertices`` / ``file_faces`` are the record counts stated by the file
+    (``None`` where the format does not state them, e.g. STL); ``loaded_*`` are
+    what trimesh returned; the other counts are the changes made afterwards.
+    """
+
+    path: str
+    format: str
+    num_vertices: int = 0
+    num_faces: int = 0
+    file_vertices: int | None = None
+    file_faces: int | None = None
+    loaded_vertices: int = 0
+    loaded_faces: int = 0
+    geometries: int = 1
+    merged_vertices: int = 0
+    degenerate_faces: int = 0
+    duplicate_faces: int = 0
+    unreferenced_vertices: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def triangulated(self) -> bool:
+        """Whether the file had polygons that trimesh split into triangles."""
+        return self.file_faces is not None and self.loaded_faces > self.file_faces
+
+    @property
+    def dropped_faces(self) -> int:
+        return self.degenerate_faces + self.duplicate_faces
+
+    def __str__(self) -> str:
+        lines = [f"{self.path} ({self.format}): {self.num_vertices} vertices, {self.num_faces} faces"]
+        if self.file_vertices is not None or self.file_faces is not None:
+            lines.append(f"  file states {self.file_vertices} vertices, {self.file_faces} faces")
+        lines.append(
+            f"  trimesh read {self.loaded_vertices} vertices, {self.loaded_faces} triangles"
+            f" from {self.geometries} geometr{'y' if self.geometries == 1 else 'ies'}"
+        )
+        if self.triangulated:
+            lines.append(
+                f"  triangulated polygons: {self.file_faces} faces -> {self.loaded_faces} triangles"
+                " (face order may differ from the file)"
+            )
+        lines.append(
+            f"  merged {self.merged_vertices} vertices with identical positions;"
+            f" dropped {self.degenerate_faces} degenerate faces, {self.duplicate_faces} duplicate faces,"
+            f" {self.unreferenced_vertices} unreferenced vertices"
+        )
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+
+@dataclass
+class MeshData:
+    """A triangle mesh read from a file.
+
+    Attributes
+    ----------
+    verts : (V, 3) float tensor
+    faces : (F, 3) int64 tensor
+    report : MeshReport
+    """
+
+    verts: torch.Tensor
+    faces: torch.Tensor
+    report: MeshReport
+
+    def __iter__(self):
+        """Allow ``verts, faces = load_mesh(path)``."""
+        return iter((self.verts, self.faces))
+
+
+def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> MeshData:
+    """Read a triangle mesh from an OBJ, PLY, OFF or STL file.
+
+    Parameters
+    ----------
+    path : str or Path
+    dtype : torch floating dtype of the returned vertices (the file is parsed in
+        float64; a smaller dtype rounds).
+    merge : merge vertices with identical positions (see the module docstring).
+        Degenerate and duplicate faces and unreferenced vertices are dropped
+        either way.
+
+    Returns
+    -------
+    MeshData
+        ``verts (V, 3)``, ``faces (F, 3)`` int64 and the :class:`MeshReport`, which is
+        also logged (INFO, or WARNING when faces were dropped or polygons split).
+
+    Raises
+    ------
+    ValueError
+        The file is missing, has an unsupported extension, cannot be parsed, holds
+        no triangles (empty, point cloud, lines), or has invalid data.
+    """
+    path = Path(path)
+    if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise ValueError(f"dtype must be a floating torch dtype, got {dtype}")
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in MESH_FORMATS:
+        raise ValueError(f"cannot read mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}")
+    if not path.is_file():
+        raise ValueError(f"cannot read mesh {path}: no such file")
+    report = MeshReport(path=str(path), format=fmt)
+    if fmt == "stl":
+        _check_stl(path)
+    verts, faces = _read_trimesh(path, report)
+    report.file_vertices, report.file_faces = _stated_counts(path, fmt)
+    report.loaded_vertices, report.loaded_faces = len(verts), len(faces)
+    if not np.all(np.isfinite(verts)):
+        raise ValueError(f"cannot read mesh {path}: {int((~np.isfinite(verts).all(1)).sum())} vertices are not finite")
+    if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
+        raise ValueError(f"cannot read mesh {path}: face indices outside [0, {len(verts)})")
+
+    if merge:
+        verts, faces = _merge_identical(verts, faces, report)
+    faces = _drop_bad_faces(faces, report)
+    if len(faces) == 0:
+        raise ValueError(f"cannot read mesh {path}: no faces left after dropping degenerate faces")
+    verts, faces = _drop_unreferenced(verts, faces, report)
+    report.num_vertices, report.num_faces = len(verts), len(faces)
+    if report.file_vertices is not None and report.file_vertices > report.num_vertices + report.unreferenced_vertices:
+        report.notes.append(
+            f"the file has {report.file_vertices - report.num_vertices} vertex records more than the mesh:"
+            " unreferenced ones (the reader skips them) or repeated positions (merged)"
+        )
+
+    level = logging.WARNING if report.dropped_faces or report.triangulated else logging.INFO
+    log.log(level, "%s", report)
+    return MeshData(torch.from_numpy(verts).to(dtype), torch.from_numpy(faces), report)
+
+
+def default_mesh(dtype: torch.dtype = torch.float64) -> MeshData:
+    """Spot the cow (Keenan Crane, public domain), shipped with the package.
+
+    Returns
+    -------
+    MeshData
+        829 vertices, 1654 faces, closed genus-0 manifold.
+    """
+    ref = resources.files(__package__ or "torch_edgevf").joinpath("data").joinpath(_DEFAULT_MESH)
+    with resources.as_file(ref) as path:
+        return load_mesh(path, dtype=dtype)
+
+
+def save_mesh(path, verts, faces) -> None:
+    """Write a triangle mesh to an OBJ, PLY, OFF or STL file (chosen by extension).
+
+    OBJ and OFF are written as text with ``%.17g`` and PLY as binary float64, so
+    they round-trip float64 positions exactly; STL stores float32 and one copy of
+    each vertex per triangle (:func:`load_mesh` merges them back).
+
+    Parameters
+    ----------
+    path : str or Path
+    verts : (V, 3) tensor or array
+    faces : (F, 3) integer tensor or array
+    """
+    path = Path(path)
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in MESH_FORMATS:
+        raise ValueError(f"cannot save mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}")
+    v, f = _check_mesh(verts, faces, f"cannot save mesh {path}")
+    if fmt == "obj":
+        _write_text(path, "", [("v %.17g %.17g %.17g", v), ("f %d %d %d", f + 1)])
+    elif fmt == "off":
+        _write_text(path, f"OFF\n{len(v)} {len(f)} 0\n", [("%.17g %.17g %.17g", v), ("3 %d %d %d", f)])
+    elif fmt == "ply":
+        header = (
+            "ply\nformat binary_little_endian 1.0\n"
+            f"element vertex {len(v)}\nproperty double x\nproperty double y\nproperty double z\n"
+            f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n"
+        )
+        packed = np.empty(len(f), dtype=[("n", "u1"), ("idx", "<i4", (3,))])
+        packed["n"], packed["idx"] = 3, f
+        with open(path, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            fh.write(v.astype("<f8").tobytes())
+            fh.write(packed.tobytes())
+    else:
+        import trimesh
+
+        trimesh.Trimesh(v, f, process=False).export(path, file_type="stl")
+
+
+def _write_text(path: Path, header: str, blocks) -> None:
+    with open(path, "w", encoding="ascii") as fh:
+        fh.write(header)
+        for fmt, arr in blocks:
+            np.savetxt(fh, arr, fmt=fmt)
+
+
+def _read_trimesh(path: Path, report: MeshReport) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (float64) and triangles (int64) of every mesh in the file, unprocessed."""
+    import trimesh
+
+    try:
+        loaded = trimesh.load(path, process=False)
+    except (ValueError, IndexError, KeyError, TypeError, NameError, OSError, UnicodeDecodeError, EOFError) as err:
+        raise ValueError(f"cannot read mesh {path}: the {report.format.upper()} parser failed ({type(err).__name__}: {err})") from err
+
+    if isinstance(loaded, trimesh.Trimesh):
+        parts = [(loaded, None)]
+    elif isinstance(loaded, trimesh.Scene):
+        parts, others = [], 0
+        for node in loaded.graph.nodes_geometry:
+            transform, name = loaded.graph[node]
+            geom = loaded.geometry[name]
+            if isinstance(geom, trimesh.Trimesh):
+                parts.append((geom, transform))
+            else:
+                others += 1
+        if others:
+            report.notes.append(f"ignored {others} non-mesh geometries (points or lines)")
+    elif isinstance(loaded, trimesh.PointCloud):
+        raise ValueError(f"cannot read mesh {path}: it is a point cloud ({len(loaded.vertices)} points, no faces)")
+    else:
+        raise ValueError(f"cannot read mesh {path}: it holds a {type(loaded).__name__}, not a triangle mesh")
+
+    parts = [(g, t) for g, t in parts if len(g.faces)]
+    if not parts:
+        raise ValueError(f"cannot read mesh {path}: no triangle faces found (the file is empty or not a valid {report.format.upper()} mesh)")
+    report.geometries = len(parts)
+    verts, faces, offset = [], [], 0
+    for geom, transform in parts:
+        v = np.asarray(geom.vertices, dtype=np.float64)
+        f = np.asarray(geom.faces, dtype=np.int64)
+        if transform is not None and not np.array_equal(transform, np.eye(4)):
+            v = v @ transform[:3, :3].T + transform[:3, 3]
+            report.notes.append("applied a scene transform to a geometry")
+            if np.linalg.det(transform[:3, :3]) < 0:
+                f = f[:, ::-1]
+                report.notes.append("a transform was a reflection: reversed that geometry's faces to keep its winding")
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    if len(parts) > 1:
+        report.notes.append(f"concatenated {len(parts)} geometries; face order may differ from the file")
+    return np.concatenate(verts), np.ascontiguousarray(np.concatenate(faces))
+
+
+def _check_stl(path: Path) -> None:
+    """Reject a file that is neither a complete binary STL nor text starting with ``solid``.
+
+    (trimesh would try to decode such bytes as text and fail with unrelated errors.)
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(84)
+    count = int.from_bytes(head[80:84], "little") if len(head) == 84 else -1
+    if size != 84 + 50 * count and not head.lstrip().lower().startswith(b"solid"):
+        raise ValueError(
+            f"cannot read mesh {path}: not an STL file (binary STL with {count} triangles needs"
+            f" {84 + 50 * count} bytes, the file has {size}; ASCII STL starts with 'solid')"
+        )
+
+
+def _stated_counts(path: Path, fmt: str) -> tuple[int | None, int | None]:
+    """Vertex and face record counts the file states (best effort, ``None`` if unknown)."""
+    if fmt == "obj":
+        data = path.read_bytes()
+        return len(re.findall(rb"(?m)^[ \t]*v[ \t]", data)), len(re.findall(rb"(?m)^[ \t]*f[ \t]", data))
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16).decode("latin-1")
+    if fmt == "ply":
+        head = head.split("end_header", 1)[0]
+        counts = {k: int(c) for k, c in re.findall(r"(?m)^element\s+(\w+)\s+(\d+)", head)}
+        return counts.get("vertex"), counts.get("face")
+    if fmt == "off":
+        tokens = " ".join(line.split("#", 1)[0] for line in head.splitlines()).split()
+        if len(tokens) >= 3 and tokens[0].endswith("OFF") and tokens[1].isdigit() and tokens[2].isdigit():
+            return int(tokens[1]), int(tokens[2])
+    return None, None
+
+
+def _merge_identical(verts: np.ndarray, faces: np.ndarray, report: MeshReport):
+    """Merge vertices with bitwise-equal positions (``-0.0 == 0.0``), first occurrence first."""
+    _, first, inverse = np.unique(verts + 0.0, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    report.merged_vertices = len(verts) - len(first)
+    return verts[first[order]], rank[inverse.reshape(-1)][faces]
+
+
+def _drop_bad_faces(faces: np.ndarray, report: MeshReport) -> np.ndarray:
+    """Drop faces with a repeated index, then repeated vertex triples (keep the first)."""
+    ok = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
+    report.degenerate_faces = int((~ok).sum())
+    faces = faces[ok]
+    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
+    report.duplicate_faces = len(faces) - len(first)
+    if report.duplicate_faces:
+        faces = faces[np.sort(first)]
+    return faces
+
+
+def _drop_unreferenced(verts: np.ndarray, faces: np.ndarray, report: MeshReport):
+    used = np.zeros(len(verts), dtype=bool)
+    used[faces] = True
+    report.unreferenced_vertices = int((~used).sum())
+    if report.unreferenced_vertices == 0:
+        return verts, faces
+    new_index = np.cumsum(used) - 1
+    return verts[used], new_index[faces]
+
+
+def _check_mesh(verts, faces, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """``verts`` as (V, 3) float64 and ``faces`` as (F, 3) int64 numpy arrays, or ``ValueError``."""
+    v = verts.detach().cpu().numpy() if isinstance(verts, torch.Tensor) else np.asarray(verts)
+    f = faces.detach().cpu().numpy() if isinstance(faces, torch.Tensor) else np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.issubdtype(v.dtype, np.floating):
+        raise ValueError(f"{where}: verts must be a (V, 3) float array, got shape {v.shape} and dtype {v.dtype}")
+    if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+        raise ValueError(f"{where}: faces must be a (F, 3) integer array, got shape {f.shape} and dtype {f.dtype}")
+    if len(f) == 0:
+        raise ValueError(f"{where}: the mesh has no faces")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError(f"{where}: face indices must lie in [0, {len(v)}), got [{f.min()}, {f.max()}]")
+    return np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)
+
+
+# ----------------------------------------------------------------------------- fields
+
+
+def edges_from_faces(faces) -> np.ndarray:
+    """Unique undirected edges of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (F, 3) integer array or tensor
+
+    Returns
+    -------
+    edges : (E, 2) int64 array
+        Pairs ``(i, j)`` with ``i < j`` in lexicographic order, the ordering of
+        :mod:`torch_edgevf.topology`.
+    """
+    f = faces.detach().cpu().numpy() if isinstance(faces, torch.Tensor) else np.asarray(faces)
+    pairs = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64), axis=1)
+    return np.unique(pairs, axis=0)
+
+
+@dataclass
+class FieldData:
+    """An edge field read by :func:`load_field`.
+
+    Attributes
+    ----------
+    verts : (V, 3) float64 tensor
+    faces : (F, 3) int64 tensor
+    edges : (E, 2) int64 tensor, ``i < j``, lexicographic order
+    z : (E,) or (E, C) complex128 tensor, in the order of ``edges``
+    n : int, symmetry order of the field (1: vectors, 2: lines, 4: crosses, ...)
+    extra : dict of the additional arrays given to :func:`save_field` (npz only)
+    """
+
+    verts: torch.Tensor
+    faces: torch.Tensor
+    edges: torch.Tensor
+    z: torch.Tensor
+    n: int
+    extra: dict = field(default_factory=dict)
+
+
+def save_field(path, verts, faces, z, n: int = 1, **extra) -> None:
+    """Save a mesh and a complex edge field to ``.npz`` or ``.txt``.
+
+    Parameters
+    ----------
+    path : str or Path, ending in ``.npz`` or ``.txt``
+    verts : (V, 3) float tensor or array
+    faces : (F, 3) integer tensor or array
+    z : (E,) or (E, C) complex (or real) tensor or array, one value per edge of
+        :func:`edges_from_faces` ``(faces)``, stored as complex128
+    n : positive int, symmetry order
+    **extra : additional numeric arrays (npz only), e.g. ``singularities=...``
+    """
+    path = Path(path)
+    where = f"cannot save field {path}"
+    v, f = _check_mesh(verts, faces, where)
+    edges = edges_from_faces(f)
+    zz = z.detach().cpu().numpy() if isinstance(z, torch.Tensor) else np.asarray(z)
+    if not (np.issubdtype(zz.dtype, np.complexfloating) or np.issubdtype(zz.dtype, np.floating)):
+        raise ValueError(f"{where}: z must be complex or real, got dtype {zz.dtype}")
+    zz = zz.astype(np.complex128)
+    if zz.ndim not in (1, 2) or zz.shape[0] != len(edges) or 0 in zz.shape[1:]:
+        raise ValueError(f"{where}: z must have shape (E,) or (E, C) with E = {len(edges)} edges and C >= 1, got {zz.shape}")
+    n = _check_n(n, where)
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        arrays = {}
+        for key, value in extra.items():
+            if key in _FIELD_KEYS or key in ("file", "allow_pickle"):
+                raise ValueError(f"{where}: extra array name {key!r} is reserved")
+            value = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
+            if value.dtype == object:
+                raise ValueError(f"{where}: extra array {key!r} is not numeric (object arrays would need pickle)")
+            arrays[key] = value
+        with open(path, "wb") as fh:  # a file object stops np.savez from appending '.npz'
+            np.savez(
+                fh, allow_pickle=False, verts=v, faces=f, edges=edges, z=zz,
+                n=np.int64(n), version=np.int64(FIELD_FORMAT_VERSION), **arrays,
+            )
+    elif suffix == ".txt":
+        if extra:
+            raise ValueError(f"{where}: the text format cannot store extra arrays {sorted(extra)}; use .npz")
+        z2 = zz.reshape(len(edges), -1)
+        parts = np.empty((len(edges), 2 * z2.shape[1]))
+        parts[:, 0::2], parts[:, 1::2] = z2.real, z2.imag
+        head = f"edgevf_field version={FIELD_FORMAT_VERSION} V={len(v)} F={len(f)} E={len(edges)} C={z2.shape[1]} n={n} dims={zz.ndim}\n"
+        edge_fmt = "%d %d " + " ".join(["%.17g"] * parts.shape[1])
+        with open(path, "w", encoding="ascii") as fh:
+            fh.write(head)
+            np.savetxt(fh, v, fmt="%.17g %.17g %.17g")
+            np.savetxt(fh, f, fmt="%d %d %d")
+            for (i, j), row in zip(edges.tolist(), parts.tolist()):
+                fh.write(edge_fmt % (i, j, *row) + "\n")
+    else:
+        raise ValueError(f"{where}: unsupported extension {path.suffix!r}, expected '.npz' or '.txt'")
+
+
+def load_field(path) -> FieldData:
+    """Load a field written by :func:`save_field` and check it.
+
+    Raises
+    ------
+    ValueError
+        Missing file, unknown extension or version, wrong shapes or dtypes, face
+        indices out of range, or stored edges that differ from the edges of the
+        faces.
+    """
+    path = Path(path)
+    where = f"cannot load field {path}"
+    if not path.is_file():
+        raise ValueError(f"{where}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        v, f, edges, z, n, extra = _read_npz(path, where)
+    elif suffix == ".txt":
+        v, f, edges, z, n, extra = _read_txt(path, where)
+    else:
+        raise ValueError(f"{where}: unsupported extension {path.suffix!r}, expected '.npz' or '.txt'")
+    v, f = _check_mesh(v, f, where)
+    expected = edges_from_faces(f)
+    if edges.shape != expected.shape or not np.array_equal(edges, expected):
+        raise ValueError(
+            f"{where}: the stored edges ({len(edges)}) do not match the {len(expected)} edges of the faces"
+            " (unique pairs i < j in lexicographic order); the file is corrupted or was written for other faces"
+        )
+    if z.ndim not in (1, 2) or z.shape[0] != len(edges):
+        raise ValueError(f"{where}: z must have shape (E,) or (E, C) with E = {len(edges)}, got {z.shape}")
+    return FieldData(
+        verts=torch.from_numpy(v),
+        faces=torch.from_numpy(f),
+        edges=torch.from_numpy(edges),
+        z=torch.from_numpy(z),
+        n=_check_n(n, where),
+        extra={k: torch.from_numpy(a) if a.dtype.kind in "biufc" else a for k, a in extra.items()},
+    )
+
+
+def _check_n(n, where: str) -> int:
+    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"{where}: n must be a positive integer, got {n!r}")
+    return int(n)
+
+
+def _read_npz(path: Path, where: str):
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as err:
+        raise ValueError(f"{where}: not a readable .npz file ({err})") from err
+    missing = [k for k in _FIELD_KEYS if k not in arrays]
+    if missing:
+        raise ValueError(f"{where}: missing arrays {missing}; not a field file written by save_field")
+    version = int(arrays.pop("version"))
+    if version != FIELD_FORMAT_VERSION:
+        raise ValueError(f"{where}: format version {version} is not supported (expected {FIELD_FORMAT_VERSION})")
+    z = arrays.pop("z")
+    edges = arrays.pop("edges")
+    if z.dtype != np.complex128:
+        raise ValueError(f"{where}: z must be complex128, got {z.dtype}")
+    if edges.ndim != 2 or edges.shape[1] != 2 or not np.issubdtype(edges.dtype, np.integer):
+        raise ValueError(f"{where}: edges must be an (E, 2) integer array, got shape {edges.shape}, dtype {edges.dtype}")
+    n = arrays.pop("n")
+    if n.shape != () or not np.issubdtype(n.dtype, np.integer):
+        raise ValueError(f"{where}: n must be an integer scalar, got shape {n.shape}, dtype {n.dtype}")
+    v, f = arrays.pop("verts"), arrays.pop("faces")
+    return v, f, edges.astype(np.int64), z, n[()], arrays
+
+
+_HEADER = re.compile(r"^edgevf_field((?:\s+\w+=\d+)+)\s*$")
+
+
+def _read_txt(path: Path, where: str):
+    with open(path, encoding="ascii", errors="replace") as fh:
+        lines = [line for line in fh.read().splitlines() if line.strip()]
+    match = _HEADER.match(lines[0]) if lines else None
+    if match is None:
+        raise ValueError(f"{where}: the first line must be 'edgevf_field version=1 V=.. F=.. E=.. C=.. n=.. dims=..'")
+    head = {k: int(val) for k, val in re.findall(r"(\w+)=(\d+)", match.group(1))}
+    missing = [k for k in ("version", "V", "F", "E", "C", "n", "dims") if k not in head]
+    if missing:
+        raise ValueError(f"{where}: header lacks {missing}")
+    if head["version"] != FIELD_FORMAT_VERSION:
+        raise ValueError(f"{where}: format version {head['version']} is not supported (expected {FIELD_FORMAT_VERSION})")
+    nv, nf, ne, nc = head["V"], head["F"], head["E"], head["C"]
+    if head["dims"] not in (1, 2) or nc < 1 or (head["dims"] == 1 and nc != 1):
+        raise ValueError(f"{where}: invalid header dims={head['dims']} C={nc}")
+    if len(lines) != 1 + nv + nf + ne:
+        raise ValueError(f"{where}: header announces {nv} + {nf} + {ne} data lines, the file has {len(lines) - 1}")
+
+    def block(start, count, cols, dtype, what):
+        rows = lines[start : start + count]
+        try:
+            arr = np.array(" ".join(rows).split(), dtype=dtype)
+        except ValueError as err:
+            raise ValueError(f"{where}: cannot parse the {what} lines ({err})") from err
+        if arr.size != count * cols:
+            raise ValueError(f"{where}: each of the {count} {what} lines must have {cols} numbers")
+        return arr.reshape(count, cols)
+
+    v = block(1, nv, 3, np.float64, "vertex")
+    f = block(1 + nv, nf, 3, np.int64, "face")
+    e = block(1 + nv + nf, ne, 2 + 2 * nc, np.float64, "edge")
+    edges = e[:, :2].astype(np.int64)
+    if not np.array_equal(edges, e[:, :2]) or np.any(edges[:, 0] >= edges[:, 1]):
+        raise ValueError(f"{where}: edge endpoints must be integers i < j")
+    order = np.lexsort((edges[:, 1], edges[:, 0]))  # accept edge lines in any order
+    edges, e = edges[order], e[order]
+    z = np.empty((ne, nc), dtype=np.complex128)
+    z.real, z.imag = e[:, 2::2], e[:, 3::2]  # not re + 1j * im, which turns -0.0 into 0.0
+    return v, f, edges, (z[:, 0] if head["dims"] == 1 else z), head["n"], {}
