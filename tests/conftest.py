@@ -1,0 +1,66 @@
+"""Shared fixtures: small meshes with fixed seeds and the path of the shared real meshes."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import torch_edgevf as ev
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def shared_mesh(name: str):
+    """Load ``../shared/meshes/<name>`` (merged), or skip when the folder is absent."""
+    path = SHARED / "meshes" / name
+    if not path.exists():
+        pytest.skip(f"{path} is not available")
+    from torch_edgevf.io import load_mesh
+
+    return load_mesh(path)
+
+
+def perturbed_icosphere(level: int = 1, scale: float = 0.05, seed: int = 0, renumber: bool = True):
+    """A noisy icosphere with randomly renumbered vertices (mixed edge orientations)."""
+    v, f = ev.icosphere(level)
+    g = torch.Generator().manual_seed(seed)
+    v = v + scale * torch.randn(v.shape, generator=g, dtype=v.dtype)
+    if renumber:
+        perm = torch.randperm(v.shape[0], generator=g)
+        inv = torch.empty_like(perm)
+        inv[perm] = torch.arange(perm.numel())
+        v, f = v[perm], inv[f]
+    return v, f
+
+
+def perturbed_grid(n: int = 4, scale: float = 0.05, seed: int = 0, flat: bool = False):
+    """A noisy grid with boundary and randomly renumbered vertices."""
+    v, f = ev.meshes.grid(n, n)
+    g = torch.Generator().manual_seed(seed)
+    noise = scale / n * torch.randn(v.shape, generator=g, dtype=v.dtype)
+    if flat:
+        noise[:, 2] = 0
+    v = v + noise
+    p = v[f]
+    normal_z = torch.linalg.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])[:, 2]
+    if flat:
+        assert bool((normal_z > 0).all()), "perturbation too strong: a triangle flipped"
+    perm = torch.randperm(v.shape[0], generator=g)
+    inv = torch.empty_like(perm)
+    inv[perm] = torch.arange(perm.numel())
+    return v[perm], inv[f]
+
+
+@pytest.fixture
+def closed_mesh():
+    return perturbed_icosphere(1, 0.05, seed=1)
+
+
+@pytest.fixture
+def open_mesh():
+    return perturbed_grid(4, 0.3, seed=2)
+
+
+def dense(a: torch.Tensor) -> np.ndarray:
+    return a.detach().to_dense().numpy()
