@@ -1,0 +1,20 @@
+"""Differentiable sparse linear algebra: solves, eigenpairs and matrix exponentials.
+
+All matrices are torch sparse tensors (coalesced COO preferred); gradients with respect
+to a matrix are returned on its sparsity pattern, through its values.
+"""
+
+from .eigen import EigenPairs, eigsh
+from .factor import NotPositiveDefiniteError, SparseSolver, factorize
+from .solve import solve, solve_constrained, solve_fixed
+
+__all__ = [
+    "EigenPairs",
+    "eigsh",
+    "NotPositiveDefiniteError",
+    "SparseSolver",
+    "factorize",
+    "solve",
+    "solve_constrained",
+    "solve_fixed",
+]

@@ -1,0 +1,180 @@
+"""Validation and conversion helpers shared by the linear-algebra routines.
+
+Every public routine of :mod:`torch_edgevf.linalg` validates its tensors here, once, and
+works afterwards on a :class:`SparseData`: the coalesced indices and the values of a
+square sparse matrix.  The values keep their autograd history (``A.coalesce().values()``
+is differentiable), so the custom autograd Functions take the *values* as input and
+return the gradient on the sparsity pattern only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import torch
+
+_FLOAT_DTYPES = (torch.float32, torch.float64, torch.complex64, torch.complex128)
+
+
+@dataclass(frozen=True)
+class SparseData:
+    """Coalesced COO data of a square sparse matrix.
+
+    Attributes
+    ----------
+    indices : (2, nnz) int64 tensor
+        Row and column of every stored entry, sorted row-major, no duplicates.
+    values : (nnz,) tensor
+        The stored entries; keeps the autograd history of the input matrix.
+    n : int
+        The matrix is ``(n, n)``.
+    """
+
+    indices: torch.Tensor
+    values: torch.Tensor
+    n: int
+
+    @property
+    def row(self) -> torch.Tensor:
+        return self.indices[0]
+
+    @property
+    def col(self) -> torch.Tensor:
+        return self.indices[1]
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.values.dtype
+
+    @property
+    def is_complex(self) -> bool:
+        return self.values.is_complex()
+
+    def is_diagonal(self) -> bool:
+        return bool(torch.equal(self.row, self.col))
+
+    def to_scipy(self) -> sp.csc_matrix:
+        """The matrix as a SciPy CSC matrix (detached, on the CPU, same dtype)."""
+        idx = self.indices.cpu().numpy()
+        vals = self.values.detach().cpu().resolve_conj().numpy()
+        return sp.csc_matrix((vals, (idx[0], idx[1])), shape=(self.n, self.n))
+
+    def matmul(self, x: torch.Tensor) -> torch.Tensor:
+        """Differentiable product ``A @ x`` for ``x`` of shape ``(n,)`` or ``(n, C)``."""
+        vals = self.values if x.dim() == 1 else self.values[:, None]
+        dtype = torch.promote_types(self.dtype, x.dtype)
+        prod = vals.to(dtype) * x.to(dtype)[self.col]
+        out = torch.zeros((self.n,) + tuple(x.shape[1:]), dtype=dtype, device=x.device)
+        return out.index_add(0, self.row, prod)
+
+
+def real_dtype(dtype: torch.dtype) -> torch.dtype:
+    """The real dtype of the same precision (``complex128 -> float64``)."""
+    return torch.empty(0, dtype=dtype).real.dtype
+
+
+def complex_dtype(dtype: torch.dtype) -> torch.dtype:
+    """The complex dtype of the same precision (``float32 -> complex64``)."""
+    return {torch.float32: torch.complex64, torch.float64: torch.complex128}.get(dtype, dtype)
+
+
+def check_finite(x: torch.Tensor, name: str) -> None:
+    """Raise ``ValueError`` if ``x`` holds NaN or Inf."""
+    if not bool(torch.isfinite(x.detach()).all()):
+        raise ValueError(f"{name} contains NaN or Inf")
+
+
+def _check_dtype(x: torch.Tensor, name: str) -> None:
+    if x.dtype not in _FLOAT_DTYPES:
+        raise ValueError(
+            f"{name} must be float32, float64, complex64 or complex128, got {x.dtype}"
+        )
+
+
+def as_sparse(A: torch.Tensor, name: str = "A") -> SparseData:
+    """Validate a square sparse matrix and return its coalesced data.
+
+    Parameters
+    ----------
+    A : (N, N) tensor
+        Sparse COO (preferred), sparse CSR/CSC or dense.  Floating or complex dtype.
+    name : str
+        Used in error messages.
+
+    Raises
+    ------
+    TypeError
+        If ``A`` is not a tensor.
+    ValueError
+        If ``A`` is not a square matrix, has an unsupported dtype, dense (hybrid)
+        dimensions, or NaN/Inf entries.
+    """
+    if not isinstance(A, torch.Tensor):
+        raise TypeError(f"{name} must be a torch tensor, got {type(A).__name__}")
+    if A.dim() != 2:
+        raise ValueError(f"{name} must be a 2-D matrix, got shape {tuple(A.shape)}")
+    if A.shape[0] != A.shape[1]:
+        raise ValueError(f"{name} must be square, got shape {tuple(A.shape)}")
+    _check_dtype(A, name)
+    if A.layout == torch.strided:
+        A = A.to_sparse()
+    elif A.layout != torch.sparse_coo:
+        A = A.to_sparse_coo()
+    if A.dense_dim() != 0:
+        raise ValueError(f"{name} must not have dense (hybrid) dimensions")
+    A = A.coalesce()
+    values = A.values()
+    check_finite(values, name)
+    return SparseData(A.indices(), values, int(A.shape[0]))
+
+
+def as_diagonal_or_sparse(M: torch.Tensor, n: int, name: str = "M") -> SparseData:
+    """Validate a real mass matrix, given sparse ``(N, N)`` or as its diagonal ``(N,)``."""
+    if isinstance(M, torch.Tensor) and M.dim() == 1 and M.layout == torch.strided:
+        _check_dtype(M, name)
+        idx = torch.arange(M.shape[0], device=M.device).expand(2, -1)
+        data = SparseData(idx, M, int(M.shape[0]))
+        check_finite(M, name)
+    else:
+        data = as_sparse(M, name)
+    if data.n != n:
+        raise ValueError(f"{name} has size {data.n} but A has size {n}")
+    if data.is_complex:
+        raise ValueError(f"{name} must be real, got {data.dtype}")
+    return data
+
+
+def check_rhs(b: torch.Tensor, n: int, dtype: torch.dtype, name: str = "b") -> None:
+    """Validate a right-hand side ``(N,)`` or ``(N, C)`` against a matrix of size ``n``."""
+    if not isinstance(b, torch.Tensor):
+        raise TypeError(f"{name} must be a torch tensor, got {type(b).__name__}")
+    if b.dim() not in (1, 2) or b.shape[0] != n:
+        raise ValueError(f"{name} must have shape ({n},) or ({n}, C), got {tuple(b.shape)}")
+    _check_dtype(b, name)
+    if real_dtype(b.dtype) != real_dtype(dtype):
+        raise ValueError(
+            f"{name} has dtype {b.dtype} but the matrix has dtype {dtype}; "
+            "use the same precision (float32/complex64 or float64/complex128)"
+        )
+    check_finite(b, name)
+
+
+def is_hermitian(K: sp.spmatrix, rtol: float | None = None) -> bool:
+    """Whether the SciPy matrix ``K`` equals its conjugate transpose up to ``rtol``."""
+    if rtol is None:
+        rtol = 100 * float(np.finfo(K.dtype).eps)
+    scale = abs(K).max() if K.nnz else 0.0
+    diff = K - K.conj().T
+    return (abs(diff).max() if diff.nnz else 0.0) <= rtol * scale
+
+
+def to_numpy(x: torch.Tensor) -> np.ndarray:
+    """Detached NumPy view/copy of ``x`` (on the CPU, conjugation resolved)."""
+    return x.detach().cpu().resolve_conj().resolve_neg().numpy()
+
+
+def from_numpy(x: np.ndarray, like: torch.Tensor, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """Tensor from a NumPy array on the device of ``like`` with ``dtype``."""
+    return torch.from_numpy(np.ascontiguousarray(x)).to(device=like.device, dtype=dtype)
