@@ -40,3 +40,6 @@ from .operators import (
 from .topology import Topology, remove_unreferenced_vertices
 
 __version__ = "0.1.0"
+
+from . import io
+from .io import FieldData, MeshData, MeshReport, default_mesh, load_field, load_mesh, save_field, save_mesh
