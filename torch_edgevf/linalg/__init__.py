@@ -5,12 +5,15 @@ to a matrix are returned on its sparsity pattern, through its values.
 """
 
 from .eigen import EigenPairs, eigsh
+from .expm import expm_multiply, implicit_euler
 from .factor import NotPositiveDefiniteError, SparseSolver, factorize
 from .solve import solve, solve_constrained, solve_fixed
 
 __all__ = [
     "EigenPairs",
     "eigsh",
+    "expm_multiply",
+    "implicit_euler",
     "NotPositiveDefiniteError",
     "SparseSolver",
     "factorize",
