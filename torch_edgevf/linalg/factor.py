@@ -132,7 +132,7 @@ class _CholmodFactor(_Factor):
         super().__init__(K)
         wide = np.complex128 if np.iscomplexobj(K.data) else np.float64
         try:
-            self._f = cholmod.cholesky(K.astype(wide))
+            self._f = cholmod.cholesky(K.astype(wide), mode="supernodal")
         except cholmod.CholmodNotPositiveDefiniteError as err:
             raise NotPositiveDefiniteError("the matrix is not positive definite") from err
 
