@@ -339,9 +339,12 @@ def _laplace_beltrami_from(g_values: torch.Tensor, mass: torch.Tensor, topo: Top
 
 
 def laplace_beltrami(verts, topo) -> torch.Tensor:
-    """The Laplace-Beltrami stiffness ``L = G^* M_z^{-1} G`` (thesis 4.2).
+    """The Laplace-Beltrami stiffness ``L = Re(G^* M_z^{-1} G)`` (thesis 4.2).
 
     Real, symmetric, positive semi-definite, constants in its kernel; acts on the 2-ring.
+    On closed meshes ``G^* M_z^{-1} G`` is real; with a boundary its imaginary part is the
+    antisymmetric form ``int grad g x grad f`` (a boundary integral), and ``L`` is the real
+    part, the Dirichlet form ``int grad g . grad f``.
     Pair it with :func:`vertex_mass` (full) for the generalized eigenproblem ``L f = lambda M_v f``.
 
     Returns
