@@ -1,0 +1,203 @@
+"""Generalized Hermitian eigenpairs: accuracy, conventions, gradients, errors."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+import torch
+from test_linalg_problems import grid_laplacian
+
+from torch_edgevf.linalg import eigsh
+
+DTYPES = [torch.float64, torch.complex128]
+METHODS = ["dense", "lanczos"]
+
+
+def reference(p, k):
+    return scipy.linalg.eigh(p.A.to_dense().numpy(), np.diag(p.m.numpy()), subset_by_index=[0, k - 1])
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("method", METHODS)
+def test_matches_dense_eigh(dtype, method):
+    p = grid_laplacian(6, 7, dtype)
+    k = 5
+    lam, X = eigsh(p.A, p.m, k, method=method)
+    ref_lam, ref_X = reference(p, k)
+    np.testing.assert_allclose(lam.numpy(), ref_lam, rtol=1e-10, atol=1e-12)
+    assert torch.all(lam[1:] >= lam[:-1])  # ascending
+    Md = torch.diag(p.m).to(dtype)
+    torch.testing.assert_close(X.mH @ Md @ X, torch.eye(k, dtype=dtype), atol=1e-10, rtol=0)
+    # same eigenvectors up to phase: |<x, M x_ref>| = 1
+    overlap = (X.mH @ Md @ torch.from_numpy(ref_X).to(dtype)).abs().diagonal()
+    torch.testing.assert_close(overlap, torch.ones(k, dtype=overlap.dtype), atol=1e-8, rtol=0)
+    A = p.A.to_dense()
+    torch.testing.assert_close(A @ X, Md @ X * lam.to(dtype), atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_phase_convention(dtype):
+    p = grid_laplacian(5, 5, dtype)
+    _, X = eigsh(p.A, p.m, 4, method="lanczos")
+    pivot = X[X.abs().argmax(0), torch.arange(4)]
+    assert torch.all(pivot.real > 0)
+    torch.testing.assert_close(pivot.imag if dtype.is_complex else torch.zeros(4, dtype=dtype),
+                               torch.zeros(4, dtype=torch.float64), atol=1e-14, rtol=0)
+
+
+def test_singular_laplacian_default_shift():
+    """The real grid Laplacian is singular (constants); the default shift handles it."""
+    p = grid_laplacian(10, 12, torch.float64)
+    lam, X = eigsh(p.A, p.m, 3, method="lanczos")
+    assert abs(float(lam[0])) < 1e-10
+    const = X[:, 0] / X[:, 0].mean()
+    torch.testing.assert_close(const, torch.ones_like(const), atol=1e-8, rtol=0)
+    np.testing.assert_allclose(lam.numpy(), reference(p, 3)[0], atol=1e-10)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_single_smallest_pair(method):
+    p = grid_laplacian(8, 9, torch.complex128)
+    lam, X = eigsh(p.A, p.m, 1, method=method)
+    assert lam.shape == (1,) and X.shape == (p.n, 1)
+    np.testing.assert_allclose(lam.numpy(), reference(p, 1)[0], rtol=1e-10)
+
+
+def test_identity_mass_and_sparse_mass_agree():
+    p = grid_laplacian(5, 6, torch.complex128)
+    lam_vec, _ = eigsh(p.A, p.m, 3, method="lanczos")
+    lam_sp, _ = eigsh(p.A, torch.diag(p.m).to_sparse(), 3, method="lanczos")
+    torch.testing.assert_close(lam_vec, lam_sp, rtol=1e-10, atol=0)
+    lam_id, _ = eigsh(p.A, None, 3, method="lanczos")
+    np.testing.assert_allclose(lam_id.numpy(), np.linalg.eigvalsh(p.A.to_dense().numpy())[:3], rtol=1e-10)
+
+
+def test_float32():
+    p = grid_laplacian(6, 7, torch.complex64)
+    lam, X = eigsh(p.A, p.m, 3, method="lanczos")
+    assert lam.dtype == torch.float32 and X.dtype == torch.complex64
+    np.testing.assert_allclose(lam.numpy(), reference(p, 3)[0], rtol=1e-4)
+
+
+# ------------------------------------------------------------------------- gradients
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("method", METHODS)
+def test_gradcheck_eigenvalues(dtype, method):
+    p = grid_laplacian(3, 4, dtype)
+
+    def f(params, m):
+        return eigsh(p.hermitian(params), m, 3, method=method).values
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+@pytest.mark.parametrize("method", METHODS)
+def test_gradcheck_gauge_invariant_eigenvector_losses(dtype, method):
+    p = grid_laplacian(3, 4, dtype)
+
+    def f(params, m):
+        X = eigsh(p.hermitian(params), m, 3, method=method).vectors
+        return X.abs() ** 2, X[:, :2] @ X[:, :2].mH
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_gradcheck_phase_fixed_eigenvectors(dtype):
+    """The phase convention is differentiated too: raw eigenvector entries pass gradcheck."""
+    p = grid_laplacian(3, 4, dtype)
+
+    def f(params):
+        return eigsh(p.hermitian(params), p.m, 2, method="lanczos").vectors
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(),))
+
+
+def test_gradcheck_sparse_mass():
+    p = grid_laplacian(3, 4, torch.complex128)
+    n = p.n
+    ar = torch.arange(n - 1)
+    mi = torch.cat([torch.stack([ar, ar + 1]), torch.stack([ar + 1, ar]), torch.arange(n).expand(2, -1)], 1)
+
+    def mass(off, diag):
+        return torch.sparse_coo_tensor(mi, torch.cat([off, off, diag]), (n, n))
+
+    off = torch.full((n - 1,), 0.05, dtype=torch.float64)
+
+    def f(params, off, diag):
+        lam, X = eigsh(p.hermitian(params), mass(off, diag), 2, method="lanczos")
+        return lam, X.abs() ** 2
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), off.requires_grad_(),
+                                        p.m.clone().requires_grad_()))
+
+
+def _degenerate_problem():
+    """Two identical decoupled blocks: every eigenvalue is double."""
+    p = grid_laplacian(3, 3, torch.float64, shift=0.5)
+    A = p.A.to_dense()
+    Z = torch.zeros_like(A)
+    return torch.cat([torch.cat([A, Z], 1), torch.cat([Z, A], 1)]).to_sparse(), p.m.repeat(2)
+
+
+def test_degenerate_projector_loss_is_supported():
+    A, m = _degenerate_problem()
+    values = A.coalesce().values().clone().requires_grad_()
+    with torch.autograd.detect_anomaly():
+        X = eigsh(torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2,
+                  method="lanczos").vectors
+        (X @ X.mT).diagonal().pow(2).sum().backward()
+    assert torch.isfinite(values.grad).all()
+
+
+def test_degenerate_basis_dependent_loss_raises():
+    A, m = _degenerate_problem()
+    values = A.coalesce().values().clone().requires_grad_()
+    X = eigsh(torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2, method="lanczos").vectors
+    with pytest.raises(ValueError, match="degenerate eigenspace"):
+        X[:, 0].pow(4).sum().backward()
+
+
+def test_eigenvalue_gradient_matches_dense_reference():
+    """Gradient of sum(lambda) on the pattern equals the dense torch.linalg.eigh gradient."""
+    p = grid_laplacian(4, 5, torch.complex128)
+    params = p.params.clone().requires_grad_()
+    eigsh(p.hermitian(params), p.m, 3).values.sum().backward()
+    params2 = p.params.clone().requires_grad_()
+    D = p.hermitian(params2).to_dense()
+    s = 1 / p.m.sqrt()
+    torch.linalg.eigvalsh(s[:, None] * D * s[None, :])[:3].sum().backward()
+    torch.testing.assert_close(params.grad, params2.grad)
+
+
+# ---------------------------------------------------------------------------- errors
+
+
+def test_error_k_out_of_range():
+    p = grid_laplacian(3, 3)
+    with pytest.raises(ValueError, match="k must be an integer with 1 <= k < N = 9, got 9"):
+        eigsh(p.A, p.m, 9)
+    with pytest.raises(ValueError, match="got 0"):
+        eigsh(p.A, p.m, 0)
+
+
+def test_error_mass_size_and_dtype():
+    p = grid_laplacian(3, 3)
+    with pytest.raises(ValueError, match="M has size 8 but A has size 9"):
+        eigsh(p.A, p.m[:8], 2)
+    with pytest.raises(ValueError, match="M must be real"):
+        eigsh(p.A, p.m.to(torch.complex128), 2)
+    with pytest.raises(ValueError, match="M has dtype torch.float32"):
+        eigsh(p.A, p.m.float(), 2)
+
+
+def test_error_nan_and_method():
+    p = grid_laplacian(3, 3)
+    m = p.m.clone()
+    m[0] = float("nan")
+    with pytest.raises(ValueError, match="M contains NaN or Inf"):
+        eigsh(p.A, m, 2)
+    with pytest.raises(ValueError, match="method must be one of"):
+        eigsh(p.A, p.m, 2, method="arpack")
