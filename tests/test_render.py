@@ -1,0 +1,219 @@
+"""Headless renderings: the PNGs are not blank, show the mesh, and draw what they should."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import torch_edgevf as ev
+
+pytest.importorskip("matplotlib")
+
+from torch_edgevf import render  # noqa: E402
+
+SIZE = 300
+GLYPH = np.array(render._GLYPH_COLOR)
+GREEN = np.array(render._POSITIVE)
+RED = np.array(render._NEGATIVE)
+
+
+def read_png(path) -> np.ndarray:
+    """(H, W, 3) floats in [0, 1]."""
+    from matplotlib.image import imread
+
+    with open(path, "rb") as fh:
+        assert fh.read(8) == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    return imread(str(path))[..., :3].astype(np.float64)
+
+
+def foreground(img: np.ndarray) -> np.ndarray:
+    """Pixels that differ from the white background."""
+    return (np.abs(img - 1.0) > 0.02).any(-1)
+
+
+def near(img: np.ndarray, color, tol: float = 0.12) -> np.ndarray:
+    return (np.abs(img - np.asarray(color)) < tol).all(-1)
+
+
+def random_field(ne: int, seed: int = 0) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed)
+    return torch.complex(torch.randn(ne, generator=g, dtype=torch.float64),
+                         torch.randn(ne, generator=g, dtype=torch.float64))
+
+
+def assert_shows_mesh(img: np.ndarray):
+    h, w = img.shape[:2]
+    assert img.reshape(-1, 3).std(0).max() > 0.1, "image is (nearly) blank"
+    distinct = np.unique((img.reshape(-1, 3) * 255).round().astype(np.int64), axis=0)
+    assert len(distinct) >= 20, f"only {len(distinct)} distinct colours"
+    fg = foreground(img)
+    centre = fg[int(0.35 * h):int(0.65 * h), int(0.35 * w):int(0.65 * w)]
+    assert centre.mean() > 0.95, f"mesh covers only {centre.mean():.0%} of the image centre"
+    rows, cols = np.flatnonzero(fg.any(1)), np.flatnonzero(fg.any(0))
+    assert (rows[-1] - rows[0]) / h > 0.8 and (cols[-1] - cols[0]) / w > 0.8, (
+        f"bounding box of the drawing spans {(rows[-1] - rows[0]) / h:.0%} x {(cols[-1] - cols[0]) / w:.0%}"
+    )
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    v, f = ev.icosphere(2)
+    topo = ev.Topology(f, v.shape[0])
+    return v, f, topo
+
+
+@pytest.mark.parametrize("n", [1, 4])
+def test_field_png_shows_mesh_and_glyphs(sphere, tmp_path, n):
+    v, f, topo = sphere
+    z = random_field(topo.num_edges, seed=n)
+    out = render.render_field(v, f, z, tmp_path / f"field{n}.png", n=n, size=SIZE)
+    assert out == tmp_path / f"field{n}.png" and out.exists()
+    img = read_png(out)
+    assert img.shape[:2] == (SIZE, SIZE)
+    assert_shows_mesh(img)
+    bare = read_png(render.render_mesh(v, f, tmp_path / "bare.png", size=SIZE))
+    assert_shows_mesh(bare)
+    glyphs, glyphs_bare = near(img, GLYPH, 0.08).mean(), near(bare, GLYPH, 0.08).mean()
+    assert glyphs > 0.03 and glyphs_bare < 1e-3, (glyphs, glyphs_bare)
+
+
+def test_smoothest_field_png(sphere, tmp_path):
+    design = pytest.importorskip("torch_edgevf.design")
+    v, f, _ = sphere
+    z = design.smoothest_field(v, f, 2)
+    img = read_png(render.render_field(v, f, z, tmp_path / "line.png", n=2, size=SIZE, elev=35, azim=10))
+    assert_shows_mesh(img)
+
+
+def test_back_face_glyphs_are_culled(tmp_path):
+    """A flat grid seen from above carries glyphs; seen from below, none."""
+    v, f = ev.meshes.grid(6, 6)
+    topo = ev.Topology(f, v.shape[0])
+    z = torch.ones(topo.num_edges, dtype=torch.complex128)
+    above = read_png(render.render_field(v, f, z, tmp_path / "above.png", size=SIZE, elev=90, azim=0))
+    below = read_png(render.render_field(v, f, z, tmp_path / "below.png", size=SIZE, elev=-90, azim=0))
+    assert near(above, GLYPH, 0.08).mean() > 0.02
+    assert near(below, GLYPH, 0.08).mean() < 1e-3
+    assert foreground(below).mean() > 0.5, "the back side of the grid itself is still drawn"
+
+
+def naive_face_directions(v, topo, z, n):
+    """psi(b) = sum_k 1/3 u_k^n z_k in the face frame, then its n angle roots, in 3D."""
+    v = v.numpy()
+    out = np.zeros((topo.num_faces, n, 3))
+    for t, face in enumerate(topo.faces.tolist()):
+        p = v[face]
+        normal = np.cross(p[1] - p[0], p[2] - p[0])
+        normal /= np.linalg.norm(normal)
+        xt = (p[1] - p[0]) / np.linalg.norm(p[1] - p[0])
+        yt = np.cross(normal, xt)
+        w = 0
+        for k in range(3):
+            e = int(topo.face_edges[t, k])
+            i, j = topo.edges[e].tolist()
+            xe = (v[j] - v[i]) / np.linalg.norm(v[j] - v[i])
+            u = complex(xe @ xt, xe @ yt)
+            w += (u ** n) * complex(z[e]) / 3
+        for k in range(n):
+            root = abs(w) * np.exp(1j * (np.angle(w) + 2 * math.pi * k) / n)
+            out[t, k] = root.real * xt + root.imag * yt
+    return out
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_glyph_directions_match_naive_barycenter_formula(n):
+    from conftest import perturbed_icosphere
+
+    v, f = perturbed_icosphere(1, 0.05, seed=3)
+    topo = ev.Topology(f, v.shape[0])
+    z = random_field(topo.num_edges, seed=7)
+    got = render.face_glyph_directions(v, topo, z, n).numpy()
+    np.testing.assert_allclose(got, naive_face_directions(v, topo, z, n), atol=1e-12)
+
+
+def test_singularities_png_colours_by_sign(sphere, tmp_path):
+    v, f, topo = sphere
+    rng = np.random.default_rng(0)
+    fi = np.zeros(topo.num_faces)
+    vi = np.zeros(topo.num_vertices)
+    fi[rng.choice(topo.num_faces, 30, replace=False)] = 1.0
+    vi[rng.choice(topo.num_vertices, 30, replace=False)] = -1.0
+    img = read_png(render.render_singularities(v, f, tmp_path / "s.png", torch.from_numpy(fi),
+                                               torch.from_numpy(vi), size=SIZE))
+    assert_shows_mesh(img)
+    assert near(img, GREEN).mean() > 1e-3 and near(img, RED).mean() > 1e-3
+
+
+def test_singularities_of_a_field(sphere, tmp_path):
+    sing = pytest.importorskip("torch_edgevf.singularities")
+    v, f, topo = sphere
+    z = random_field(topo.num_edges, seed=1)
+    s = sing.singularities(v, f, z, 1)
+    assert (s.face_index > 0).any() and (s.face_index < 0).any()
+    img = read_png(render.render_singularities(v, f, tmp_path / "s.png", s.face_index, s.vertex_index,
+                                               z=z, size=SIZE))
+    assert near(img, GREEN).mean() > 1e-4 and near(img, RED).mean() > 1e-4
+    assert near(img, GLYPH, 0.08).mean() > 0.02
+
+
+def test_hidden_singularity_is_not_drawn(sphere, tmp_path):
+    v, f, topo = sphere
+    cam = render.Camera(elev=0, azim=0)
+    normal = ev.face_normals(v, f).numpy() @ cam.view
+    facing, away = int(np.argmax(normal)), int(np.argmin(normal))
+    for face, expect in ((facing, True), (away, False)):
+        fi = torch.zeros(topo.num_faces, dtype=torch.float64)
+        fi[face] = 1.0
+        img = read_png(render.render_singularities(v, f, tmp_path / f"{face}.png", fi, camera=cam, size=SIZE))
+        assert (near(img, GREEN).sum() > 20) == expect, (face, expect)
+
+
+def test_parametrization_checkerboard(tmp_path):
+    v, f = ev.meshes.grid(8, 8)
+    uv = v[:, :2][f]  # (F, 3, 2)
+    img = read_png(render.render_parametrization(v, f, uv, tmp_path / "p.png", scale=4, subdivide=3,
+                                                 elev=90, azim=-90, size=SIZE))
+    fg = foreground(img)
+    assert fg.mean() > 0.7
+    # the light squares are shaded white-ish but not background white; the dark ones blue
+    dark = (img[..., 2] > img[..., 0] + 0.2)
+    frac = dark[fg].mean()
+    assert 0.35 < frac < 0.65, f"dark squares cover {frac:.0%} of the grid, expected about half"
+    # a 4 x 4 checkerboard: along the middle row the colour changes about 4 times
+    row = dark[SIZE // 2 + 7, :][fg[SIZE // 2 + 7, :]]
+    changes = int(np.abs(np.diff(row.astype(int))).sum())
+    assert 3 <= changes <= 6, changes
+
+
+def test_parametrization_on_sphere_shows_mesh(sphere, tmp_path):
+    v, f, _ = sphere
+    vv = v.numpy()
+    uv = np.stack([np.arctan2(vv[:, 1], vv[:, 0]) / math.pi, np.arccos(np.clip(vv[:, 2], -1, 1)) / math.pi], -1)
+    img = read_png(render.render_parametrization(v, f, uv[f.numpy()], tmp_path / "p.png", subdivide=1, size=SIZE))
+    assert_shows_mesh(img)
+
+
+def test_float32_numpy_inputs(tmp_path):
+    v, f = ev.icosphere(1, dtype=torch.float32)
+    out = render.render_mesh(v.numpy(), f.numpy().astype(np.int32), tmp_path / "m.png", size=64, edges=True)
+    assert_shows_mesh(read_png(out))
+
+
+def test_errors(sphere, tmp_path):
+    v, f, topo = sphere
+    with pytest.raises(ValueError, match="uv must have shape"):
+        render.render_parametrization(v, f, torch.zeros(topo.num_faces, 2), tmp_path / "x.png")
+    with pytest.raises(ValueError, match="face_index must have shape"):
+        render.render_singularities(v, f, tmp_path / "x.png", torch.zeros(3))
+    with pytest.raises(ValueError, match="size"):
+        render.render_mesh(v, f, tmp_path / "x.png", size=3)
+    with pytest.raises(ValueError, match="elev"):
+        render.render_mesh(v, f, tmp_path / "x.png", elev=float("nan"))
+    with pytest.raises(ValueError, match="z must have shape"):
+        render.render_field(v, f, torch.zeros(5, dtype=torch.complex128), tmp_path / "x.png")
+    bad = v.clone()
+    bad[4, 1] = float("nan")
+    with pytest.raises(ValueError, match=r"vertices \[4\]"):
+        render.render_mesh(bad, f, tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
