@@ -1,0 +1,57 @@
+"""Transport of a vector field around the sphere along its latitudes (thesis 5.1, fig. 5.1).
+
+The rotation field ``w = e_z x p`` is transported along itself 1, 2 and 3 times around the
+globe (``t = 2 pi k``). Parallel transport along a latitude at colatitude ``theta`` turns a
+vector by ``2 pi k cos(theta)`` relative to ``w``; the norm is preserved. Prints the norm and
+L2 errors per turn. Without regularization the semi-discrete flow blows up within one
+turn (a few spurious growing modes; the thesis: "the solution quickly diverges"); light smoothing with the connection Laplacian (as in the
+thesis) damps the dispersion of the semi-discrete transport.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import torch
+
+import torch_edgevf as ev
+from torch_edgevf.fields import edge_frames
+from torch_edgevf.topology import Topology
+from torch_edgevf.transport import Transporter
+
+log = logging.getLogger(__name__)
+
+
+def main(level: int = 4, turns: int = 3, steps_per_turn: int = 8, smoothing: float = 1e-3):
+    """Return ``[(turn, norm error, error), ...]``: relative ``M_z``-weighted L2 errors of
+    ``|z|`` against ``|w|`` and of ``z`` against the exact transport."""
+    verts, faces = ev.icosphere(level)
+    topo = Topology(faces)
+    x, y, _ = edge_frames(verts, topo)
+    e = topo.edges
+    p = (verts[e[:, 0]] + verts[e[:, 1]]) / 2
+    p = p / p.norm(dim=1, keepdim=True)
+    w3 = torch.linalg.cross(torch.tensor([0.0, 0.0, 1.0], dtype=p.dtype).expand_as(p), p)
+    w = torch.complex((w3 * x).sum(1), (w3 * y).sum(1))
+    tr = Transporter(verts, topo, w, smoothing=smoothing)
+    z = w
+    out = []
+    m = ev.mass_matrix(verts, topo).values()
+
+    def rel(a):
+        return float(((m * a.abs() ** 2).sum() / (m * w.abs() ** 2).sum()).sqrt())
+
+    for k in range(1, turns + 1):
+        z = tr(z, 2 * math.pi, steps=steps_per_turn)
+        expected = w * torch.polar(torch.ones_like(p[:, 2]), 2 * math.pi * k * p[:, 2])
+        norm_err = rel(z.abs() - w.abs())
+        err = rel(z - expected)
+        log.info("turn %d: L2 norm error %.3g, L2 error vs exact transport %.3g", k, norm_err, err)
+        out.append((k, norm_err, err))
+    return out
+
+
+if __name__ == "__main__":
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    main()
