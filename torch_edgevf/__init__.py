@@ -43,3 +43,35 @@ __version__ = "0.1.0"
 
 from . import io
 from .io import FieldData, MeshData, MeshReport, default_mesh, load_field, load_mesh, save_field, save_mesh
+
+from . import linalg
+from .linalg import (
+    EigenPairs,
+    SparseSolver,
+    eigsh,
+    expm_multiply,
+    factorize,
+    implicit_euler,
+    solve,
+    solve_constrained,
+    solve_fixed,
+)
+
+from . import fields
+from .design import (
+    FieldDesigner,
+    aligned_field,
+    constrained_field,
+    curl_free_field,
+    curvature_aligned_field,
+    curvature_field,
+    div_free_field,
+    heat_diffuse,
+    smoothest_field,
+)
+from .fields import nth_power, nth_root, nth_roots
+
+from .singularities import Singularities, locate_singularities, singularities, split_singular_faces
+from .poisson import GradientProjector, project_on_gradients
+from .transport import Transporter, transport
+from .param import parametrize
