@@ -20,9 +20,14 @@ rotated field ``dPhi psi_0`` the transported vector at colatitude ``theta`` is t
 latitude integrated over its arc length ``t sin theta``); see
 ``tests/test_transport.py`` and ``examples/transport_sphere.py`` (thesis figure 5.1).
 
-The semi-discrete operator is not dissipative, so high frequencies are dispersed rather
-than damped; as in the thesis, an optional implicit heat step with the connection
-Laplacian, ``z <- (M_z + s L_c)^{-1} M_z z``, regularizes between transport steps.
+The semi-discrete operator ``M_z^{-1} D_w`` is not normal and has a few growing modes:
+without regularization, transport along the sphere's rotation field is accurate for
+``t ~ 1`` (relative errors ~2% at icosphere level 3, halving per level) but blows up
+within one full turn (``t = 2 pi``: L2 error 0.45 at level 3, x150 after two turns). As in
+the thesis ("the solution quickly diverges"), an optional implicit heat step with the
+connection Laplacian, ``z <- (M_z + s L_c)^{-1} M_z z``, regularizes between transport
+steps (``s = 1e-3``, 8 steps per turn: L2 error 0.25 after one turn at level 3, 0.15 at
+level 4, at the price of damping the norm).
 """
 
 from __future__ import annotations
