@@ -1,0 +1,344 @@
+"""Learning layers (torch_edgevf.nn) and reference networks (torch_edgevf.models).
+
+Properties: exactness against dense references (matrix exponential, dense solves, the
+finite-difference identity of the gradient), gauge equivariance of every layer, module and
+function agreement, gradcheck in float64, and invariance of the networks to rigid motions
+and vertex renumbering.
+"""
+
+import numpy as np
+import pytest
+import scipy.linalg
+import torch
+
+import torch_edgevf as ev
+from torch_edgevf import data, models
+from torch_edgevf import nn as enn
+
+from conftest import perturbed_icosphere
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    v, f = perturbed_icosphere(1, 0.05, seed=1)
+    topo = ev.Topology(f, v.shape[0])
+    L = ev.connection_laplacian(v, topo, 1)
+    m = ev.mass_matrix(v, topo).values()
+    w, X = scipy.linalg.eigh(L.to_dense().numpy(), np.diag(m.numpy()))
+    return dict(v=v, f=f, topo=topo, L=L, m=m, evals=torch.tensor(w), evecs=torch.tensor(X))
+
+
+def _z(n, c, seed=0, dtype=torch.complex128):
+    g = torch.Generator().manual_seed(seed)
+    return torch.randn(n, c, generator=g, dtype=dtype)
+
+
+def _phases(n, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    return torch.polar(torch.ones(n, dtype=torch.float64), 2 * np.pi * torch.rand(n, generator=g, dtype=torch.float64))
+
+
+# --------------------------------------------------------------------------- diffusion
+
+
+def test_spectral_diffusion_full_basis_is_matrix_exponential(mesh):
+    z, t = _z(mesh["topo"].num_edges, 3), torch.tensor([0.01, 0.1, 0.5], dtype=torch.float64)
+    out = enn.spectral_diffusion(z, mesh["evals"], mesh["evecs"], mesh["m"], t)
+    A = np.diag(1 / mesh["m"].numpy()) @ mesh["L"].to_dense().numpy()
+    ref = np.stack([scipy.linalg.expm(-t[c].item() * A) @ z[:, c].numpy() for c in range(3)], 1)
+    np.testing.assert_allclose(out.numpy(), ref, atol=1e-10)
+
+
+def test_spectral_diffusion_truncated_is_projection_at_zero(mesh):
+    k = 10
+    phi, m = mesh["evecs"][:, :k], mesh["m"]
+    z = _z(mesh["topo"].num_edges, 2)
+    out = enn.spectral_diffusion(z, mesh["evals"][:k], phi, m, torch.zeros(2, dtype=torch.float64))
+    again = enn.spectral_diffusion(out, mesh["evals"][:k], phi, m, torch.zeros(2, dtype=torch.float64))
+    torch.testing.assert_close(again, out)  # a projector
+    # and independent of the phase of each eigenvector
+    rotated = phi * _phases(k)[None, :]
+    torch.testing.assert_close(enn.spectral_diffusion(z, mesh["evals"][:k], rotated, m, torch.ones(2, dtype=torch.float64)),
+                               enn.spectral_diffusion(z, mesh["evals"][:k], phi, m, torch.ones(2, dtype=torch.float64)))
+
+
+def test_spectral_diffusion_batch_matches_single(mesh):
+    k = 8
+    z1, z2 = _z(mesh["topo"].num_edges, 2, 0), _z(mesh["topo"].num_edges, 2, 1)
+    t = torch.tensor([0.05, 0.2], dtype=torch.float64)
+    ev_, phi, m = mesh["evals"][:k], mesh["evecs"][:, :k], mesh["m"]
+    single = [enn.spectral_diffusion(z, ev_, phi, m, t) for z in (z1, z2)]
+    ne = z1.shape[0]
+    batched = enn.spectral_diffusion(torch.cat([z1, z2]), torch.stack([ev_, ev_]), torch.cat([phi, phi]),
+                                     torch.cat([m, m]), t, offsets=[0, ne, 2 * ne])
+    torch.testing.assert_close(batched, torch.cat(single))
+
+
+def test_implicit_diffusion_matches_dense_solve(mesh):
+    z, t = _z(mesh["topo"].num_edges, 2), torch.tensor([0.05, 0.3], dtype=torch.float64)
+    out = enn.implicit_diffusion(z, mesh["L"], mesh["m"], t)
+    Ld, M = mesh["L"].to_dense().numpy(), np.diag(mesh["m"].numpy())
+    ref = np.stack([np.linalg.solve(M + t[c].item() * Ld, M @ z[:, c].numpy()) for c in range(2)], 1)
+    np.testing.assert_allclose(out.detach().numpy(), ref, atol=1e-10)
+
+
+def test_diffusion_gradcheck(mesh):
+    k = 6
+    z = _z(mesh["topo"].num_edges, 2).requires_grad_()
+    t = torch.tensor([0.05, 0.3], dtype=torch.float64, requires_grad=True)
+    evals, phi, m = mesh["evals"][:k], mesh["evecs"][:, :k], mesh["m"]
+    assert torch.autograd.gradcheck(lambda z, t: enn.spectral_diffusion(z, evals, phi, m, t), (z, t))
+    assert torch.autograd.gradcheck(lambda z, t: enn.implicit_diffusion(z, mesh["L"], m, t), (z, t))
+
+
+def test_learned_diffusion_module_wraps_functions(mesh):
+    k = 8
+    z = _z(mesh["topo"].num_edges, 3).to(torch.complex64)
+    for method in ("spectral", "implicit"):
+        layer = enn.LearnedDiffusion(3, method=method)
+        assert bool((layer.times > 0).all())
+        t = layer.times
+        if method == "spectral":
+            out = layer(z, mesh["m"].float(), evals=mesh["evals"][:k].float(), evecs=mesh["evecs"][:, :k].to(torch.complex64))
+            ref = enn.spectral_diffusion(z, mesh["evals"][:k].float(), mesh["evecs"][:, :k].to(torch.complex64),
+                                         mesh["m"].float(), t)
+        else:
+            L = mesh["L"].to(torch.complex64)
+            out = layer(z, mesh["m"].float(), L=L)
+            ref = enn.implicit_diffusion(z, L, mesh["m"].float(), t)
+        assert out.dtype == torch.complex64
+        torch.testing.assert_close(out, ref)
+        out.abs().sum().backward()
+        assert layer.raw_times.grad is not None and torch.isfinite(layer.raw_times.grad).all()
+    abs_layer = enn.LearnedDiffusion(2, positivity="abs", init_times=0.1)
+    torch.testing.assert_close(abs_layer.times, torch.full((2,), 0.1))
+
+
+# --------------------------------------------------------------------------- gradient features
+
+
+def test_gradient_features_finite_difference_and_adjoint(mesh):
+    v, topo = mesh["v"], mesh["topo"]
+    G = ev.gradient(v, topo)
+    f = torch.randn(v.shape[0], 2, dtype=torch.float64)
+    z = enn.gradient_features(f, G, mesh["m"])
+    e = topo.edges
+    length = (v[e[:, 1]] - v[e[:, 0]]).norm(dim=1)
+    torch.testing.assert_close(z.real, (f[e[:, 1]] - f[e[:, 0]]) / length[:, None])  # thesis (4.1)
+    w = _z(topo.num_edges, 2)
+    mv = ev.vertex_mass(v, topo, lumped=True).values()
+    dc = enn.divergence_features(w, G, mv)
+    div, curl = ev.vertex_div_curl(v, topo, w)
+    torch.testing.assert_close(dc.real, div)
+    torch.testing.assert_close(dc.imag, curl)
+    # adjointness: <grad f, w>_{M_z} = f^T G^H w = -f^T M_v (div + i curl)
+    lhs = ((mesh["m"][:, None] * z).conj() * w).sum()
+    rhs = -(f * mv[:, None] * dc).sum()
+    torch.testing.assert_close(lhs, rhs)
+    # curl of a gradient vanishes at every vertex
+    assert enn.divergence_features(z, G, mv).imag.abs().max() < 1e-10
+    assert torch.equal(enn.GradientFeatures()(f, G, mesh["m"]), z)
+    assert torch.equal(enn.DivergenceFeatures()(w, G, mv), dc)
+
+
+def test_gradient_features_gradcheck(mesh):
+    G = ev.gradient(mesh["v"], mesh["topo"])
+    f = torch.randn(mesh["v"].shape[0], 2, dtype=torch.float64, requires_grad=True)
+    w = _z(mesh["topo"].num_edges, 2).requires_grad_()
+    mv = ev.vertex_mass(mesh["v"], mesh["topo"], lumped=True).values()
+    assert torch.autograd.gradcheck(lambda f: enn.gradient_features(f, G, mesh["m"]), (f,))
+    assert torch.autograd.gradcheck(lambda w: enn.divergence_features(w, G, mv), (w,))
+
+
+# --------------------------------------------------------------------------- pointwise layers
+
+
+def test_pointwise_layers_are_gauge_equivariant():
+    torch.manual_seed(0)
+    z = _z(50, 4).to(torch.complex64)
+    u = _phases(50).to(torch.complex64)[:, None]
+    lin, act, read = enn.ComplexLinear(4, 3), enn.ModReLU(4, bias=-0.3), enn.InvariantReadout(4)
+    torch.testing.assert_close(lin(u * z), u * lin(z))
+    torch.testing.assert_close(act(u * z), u * act(z))
+    torch.testing.assert_close(read(u * z), read(z))
+    assert read(z).shape == (50, 8) and not read(z).is_complex()
+    # modules wrap functions
+    torch.testing.assert_close(lin(z), enn.complex_linear(z, torch.view_as_complex(lin.weight)))
+    torch.testing.assert_close(act(z), enn.modulus_relu(z, act.bias))
+    torch.testing.assert_close(read(z), enn.invariant_features(z, read.weight))
+    # ModReLU: modulus relu(|z| + b), phase kept
+    out = enn.modulus_relu(z, torch.full((4,), -0.3))
+    torch.testing.assert_close(out.abs(), torch.relu(z.abs() - 0.3))
+    keep = out.abs() > 0
+    torch.testing.assert_close(torch.angle(out[keep]), torch.angle(z[keep]))
+
+
+def test_modulus_relu_is_safe_at_zero():
+    z = torch.zeros(3, 2, dtype=torch.complex128, requires_grad=True)
+    for b in (-0.5, 0.0, 0.5):
+        out = enn.modulus_relu(z, torch.full((2,), b, dtype=torch.float64))
+        assert torch.equal(out.detach(), torch.zeros_like(out))
+        (g,) = torch.autograd.grad(out.abs().sum() + out.real.sum(), z)
+        assert torch.isfinite(torch.view_as_real(g)).all()
+
+
+def test_pointwise_gradcheck():
+    z = _z(6, 3).requires_grad_()
+    w = _z(3, 3, seed=2).requires_grad_()
+    b = torch.tensor([-0.2, 0.1, -1.0], dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(enn.complex_linear, (z, w))
+    assert torch.autograd.gradcheck(lambda z, b: enn.modulus_relu(z, b), (z, b))
+    assert torch.autograd.gradcheck(lambda z, w: enn.invariant_features(z, w), (z, w))
+
+
+def test_normalize_modulus():
+    z = _z(20, 2)
+    w = torch.rand(20, dtype=torch.float64) + 0.1
+    batch = torch.tensor([0] * 8 + [1] * 12)
+    out = enn.normalize_modulus(z * 7, w, batch)
+    power = enn.pool_global(out.abs() ** 2, w, batch)
+    torch.testing.assert_close(power, torch.ones(2, 2, dtype=torch.float64), atol=1e-6, rtol=1e-6)
+    torch.testing.assert_close(enn.ModulusNorm()(z, w, batch), enn.normalize_modulus(z, w, batch))
+
+
+# --------------------------------------------------------------------------- pooling
+
+
+def test_pooling(mesh):
+    topo = mesh["topo"]
+    w = mesh["m"]
+    x = torch.randn(topo.num_edges, 3, dtype=torch.float64)
+    const = torch.ones(topo.num_edges, 2, dtype=torch.float64)
+    for out in (enn.pool_edges_to_vertices(const, topo.edges, topo.num_vertices, w),
+                enn.pool_edges_to_faces(const, topo.face_edges, w), enn.pool_global(const, w)):
+        torch.testing.assert_close(out, torch.ones_like(out))
+    pv = enn.pool_edges_to_vertices(x, topo.edges, topo.num_vertices, w)
+    vtx = 5
+    inc = ((topo.edges == vtx).any(1)).nonzero().flatten()
+    torch.testing.assert_close(pv[vtx], (w[inc, None] * x[inc]).sum(0) / w[inc].sum())
+    pf = enn.pool_edges_to_faces(x, topo.face_edges, w)
+    fe = topo.face_edges[7]
+    torch.testing.assert_close(pf[7], (w[fe, None] * x[fe]).sum(0) / w[fe].sum())
+    torch.testing.assert_close(enn.pool_global(x, w), ((w[:, None] * x).sum(0) / w.sum())[None])
+    # modules wrap functions
+    torch.testing.assert_close(enn.EdgePooling("vertex")(x, w, edges=topo.edges, num_vertices=topo.num_vertices), pv)
+    torch.testing.assert_close(enn.EdgePooling("face")(x, w, face_edges=topo.face_edges), pf)
+    torch.testing.assert_close(enn.EdgePooling("global")(x, w), enn.pool_global(x, w))
+
+
+# --------------------------------------------------------------------------- errors
+
+
+def test_errors(mesh):
+    ne = mesh["topo"].num_edges
+    z = _z(ne, 2)
+    t = torch.ones(2, dtype=torch.float64)
+    with pytest.raises(ValueError, match="shape"):
+        enn.spectral_diffusion(z[:, 0], mesh["evals"], mesh["evecs"], mesh["m"], t)
+    with pytest.raises(ValueError, match="times"):
+        enn.spectral_diffusion(z, mesh["evals"], mesh["evecs"], mesh["m"], torch.ones(3, dtype=torch.float64))
+    with pytest.raises(ValueError, match="mass"):
+        enn.spectral_diffusion(z, mesh["evals"], mesh["evecs"], mesh["m"][:-1], t)
+    with pytest.raises(ValueError, match="offsets"):
+        enn.spectral_diffusion(z, mesh["evals"][None], mesh["evecs"], mesh["m"], t, offsets=[0, 5])
+    with pytest.raises(ValueError, match="complex"):
+        enn.complex_linear(z.real, torch.ones(2, 2, dtype=torch.complex128))
+    with pytest.raises(ValueError, match="weight"):
+        enn.complex_linear(z, torch.ones(3, 2, dtype=torch.complex128))
+    with pytest.raises(ValueError, match="real vertex scalars"):
+        enn.gradient_features(z[:42], ev.gradient(mesh["v"], mesh["topo"]), mesh["m"])
+    with pytest.raises(ValueError, match="sparse"):
+        enn.gradient_features(torch.ones(42, 1, dtype=torch.float64), torch.ones(ne, 42), mesh["m"])
+    with pytest.raises(ValueError, match="bias"):
+        enn.modulus_relu(z, torch.ones(3, dtype=torch.float64))
+    with pytest.raises(ValueError, match="method"):
+        enn.LearnedDiffusion(2, method="euler")
+    with pytest.raises(ValueError, match="positive"):
+        enn.LearnedDiffusion(2, init_times=-1.0)
+    with pytest.raises(ValueError, match="to must be"):
+        enn.EdgePooling("edge")
+    with pytest.raises(ValueError, match="head"):
+        models.EdgeFieldNet(4, 2, head="edge")
+
+
+# --------------------------------------------------------------------------- networks
+
+
+def _sample(v, f, k_edge=24, k_vertex=16):
+    o = data.compute_operators(v, f, k_edge=k_edge, k_vertex=k_vertex, vertex_gradient=True)
+    x = data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=8, area=o.face_area.sum())
+    return data.MeshSample(o, x, 0)
+
+
+@pytest.fixture(scope="module")
+def moved_pair():
+    v, f = perturbed_icosphere(2, 0.05, seed=3, renumber=False)
+    g = torch.Generator().manual_seed(5)
+    Q, _ = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))
+    perm = torch.randperm(v.shape[0], generator=g)
+    inv = torch.empty_like(perm)
+    inv[perm] = torch.arange(perm.numel())
+    fperm = torch.randperm(f.shape[0], generator=g)
+    v2 = (v @ Q.T + torch.tensor([0.5, -2.0, 3.0], dtype=torch.float64))[perm]
+    f2 = inv[f][fperm]
+    return _sample(v, f), _sample(v2, f2), inv, fperm
+
+
+@pytest.mark.parametrize("model", [models.EdgeFieldNet, models.DiffusionNetBaseline])
+@pytest.mark.parametrize("head", ["global", "vertex", "face"])
+def test_networks_invariant_to_rigid_motion_and_renumbering(moved_pair, model, head):
+    s1, s2, inv, fperm = moved_pair
+    torch.manual_seed(0)
+    net = model(8, 5, width=8, num_blocks=2, head=head).double()
+    y1 = net(data.MeshBatch.from_operators(s1.operators, s1.features))
+    y2 = net(data.MeshBatch.from_operators(s2.operators, s2.features))
+    if head == "vertex":
+        y2 = y2[inv]  # vertex a of mesh 1 is vertex inv[a] of mesh 2
+    elif head == "face":
+        y1 = y1[fperm]
+    torch.testing.assert_close(y2, y1, atol=1e-8, rtol=1e-7)
+
+
+def test_edge_features_equivariant_to_renumbering(moved_pair):
+    """Complex edge features follow the edge permutation, with a sign where an edge flips."""
+    s1, s2, inv, _ = moved_pair
+    o1, o2 = s1.operators, s2.operators
+    torch.manual_seed(0)
+    block = enn.LearnedDiffusion(8).double()
+    z1 = enn.gradient_features(s1.features, o1.gradient, o1.edge_mass)
+    z2 = enn.gradient_features(s2.features, o2.gradient, o2.edge_mass)
+    # edge e1 = (a, b) of mesh 1 is (inv[a], inv[b]) in mesh 2
+    mapped = inv[o1.edges]
+    key2 = {tuple(e): i for i, e in enumerate(o2.edges.tolist())}
+    index = torch.tensor([key2[tuple(sorted(e))] for e in mapped.tolist()])
+    sign = torch.where(mapped[:, 0] < mapped[:, 1], 1.0, -1.0).to(torch.float64)[:, None]
+    torch.testing.assert_close(z2[index], sign * z1)
+    d1 = block(z1, o1.edge_mass, evals=o1.edge_evals, evecs=o1.edge_evecs)
+    d2 = block(z2, o2.edge_mass, evals=o2.edge_evals, evecs=o2.edge_evecs)
+    torch.testing.assert_close(d2[index], sign * d1, atol=1e-8, rtol=1e-7)
+
+
+def test_networks_batch_equals_single_and_float32(moved_pair):
+    s1, s2, _, _ = moved_pair
+    torch.manual_seed(0)
+    for model in (models.EdgeFieldNet, models.DiffusionNetBaseline):
+        net = model(8, 3, width=8, num_blocks=1).double()
+        both = net(data.collate_meshes([s1, s2]))
+        single = torch.cat([net(data.collate_meshes([s])) for s in (s1, s2)])
+        torch.testing.assert_close(both, single)
+        net32 = model(8, 3, width=8, num_blocks=1)
+        b32 = data.collate_meshes([data.MeshSample(s.operators.to(torch.float32), s.features.float(), 1)
+                                   for s in (s1, s2)])
+        out = net32(b32)
+        assert out.dtype == torch.float32 and out.shape == (2, 3)
+        loss = torch.nn.functional.cross_entropy(out, b32.labels)
+        loss.backward()
+        assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in net32.parameters())
+
+
+def test_edge_network_implicit_diffusion(moved_pair):
+    s1, _, _, _ = moved_pair
+    torch.manual_seed(0)
+    net = models.EdgeFieldNet(8, 2, width=4, num_blocks=1, diffusion="implicit").double()
+    out = net(data.MeshBatch.from_operators(s1.operators, s1.features))
+    assert out.shape == (1, 2) and torch.isfinite(out).all()
