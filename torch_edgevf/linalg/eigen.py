@@ -2,7 +2,7 @@ r"""Differentiable generalized Hermitian eigenpairs :math:`A x = \lambda M x` (t
 
 Forward
 -------
-Shift-invert Lanczos with thick restarts on :math:`T = (A - \sigma M)^{-1} M`, which is
+Shift-invert block Lanczos with thick restarts on :math:`T = (A - \sigma M)^{-1} M`, which is
 self-adjoint in the :math:`M` inner product; :math:`A - \sigma M` is factored once with
 :func:`~torch_edgevf.linalg.factor.factorize` (Cholesky type for :math:`\sigma` below the
 spectrum).  Complex Hermitian problems get a Hermitian Lanczos, not the non-Hermitian
@@ -80,58 +80,97 @@ def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     return -eps * (scale if scale > 0 else 1.0)
 
 
-def _lanczos(op, M, n, k, dtype, *, ncv, tol, maxiter, v0):
-    """Thick-restart Lanczos for the ``k`` largest eigenvalues of ``op``, M-self-adjoint.
+def _orthonormalize(W, V, MV, M, rng):
+    """M-orthonormalize ``W`` against ``V`` and within itself, twice for stability.
 
-    Returns Ritz values ``theta`` (k,), descending, and Ritz vectors (n, k), and the
-    number of applications of ``op``.
+    Returns ``(Q, MQ, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I``, ``V^H M Q = 0``.
     """
-    m = min(max(ncv, k + 2), n)
-    V = np.zeros((n, m + 1), dtype=dtype)
+    Q, MQ, C, R = _orthonormalize_once(W, V, MV, M, rng)
+    Q, MQ, C2, R2 = _orthonormalize_once(Q, V, MV, M, rng)
+    return Q, MQ, C + C2 @ R, R2 @ R
+
+
+def _orthonormalize_once(W, V, MV, M, rng):
+    """M-orthogonalize the block ``W`` against ``V`` (two passes) and within itself.
+
+    Returns ``(Q, MQ, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I``, ``V^H M Q = 0``.
+    Directions lost to rank deficiency are replaced by random ones (with ``R`` zero there).
+    """
+    C = MV.conj().T @ W
+    W = W - V @ C
+    C2 = MV.conj().T @ W
+    W = W - V @ C2
+    C = C + C2
+    MW = M @ W
+    d, U = scipy.linalg.eigh(W.conj().T @ MW)
+    d = np.maximum(d.real, 0.0)
+    good = d > 1e-24 * max(d.max(), 1e-300)
+    if not good.all():
+        fresh = rng.standard_normal((W.shape[0], int((~good).sum()))).astype(W.dtype)
+        Wg = W @ U[:, good] / np.sqrt(d[good])
+        basis = np.concatenate([V, Wg], axis=1)
+        mbasis = np.concatenate([MV, M @ Wg], axis=1)
+        for _ in range(2):
+            fresh = fresh - basis @ (mbasis.conj().T @ fresh)
+        Q, MQ = np.concatenate([Wg, fresh], axis=1), None
+        R = np.zeros((W.shape[1], W.shape[1]), dtype=W.dtype)
+        R[: int(good.sum())] = (np.sqrt(d[good])[:, None] * U[:, good].conj().T)
+        MQ = M @ Q
+        G = Q.conj().T @ MQ  # re-normalize the fresh directions
+        Lc = np.linalg.cholesky((G + G.conj().T) / 2)
+        T = np.linalg.inv(Lc).conj().T
+        return Q @ T, MQ @ T, C, np.linalg.solve(T, R)
+    scale = 1.0 / np.sqrt(d)
+    return W @ (U * scale), MW @ (U * scale), C, np.sqrt(d)[:, None] * U.conj().T
+
+
+def _lanczos(op, M, n, k, dtype, *, ncv, block, tol, maxiter, v0):
+    """Block thick-restart Lanczos for the ``k`` largest eigenvalues of ``op`` (M-self-adjoint).
+
+    The block size ``block`` bounds the multiplicity of the eigenvalues it can resolve
+    (symmetric meshes have clusters of up to 5 or 6 equal eigenvalues).  Returns Ritz
+    values ``theta`` (k,) descending, Ritz vectors (n, k), and the number of solves.
+    """
+    b = block
+    m = b * max(-(-ncv // b), -(-(k + 2 * b) // b))
+    m = min(m, b * (n // b) - b) if n > 2 * b else m
+    p = m - b * max(1, (m - k) // (2 * b))
+    rng = np.random.default_rng(0)
+    V = np.zeros((n, m + b), dtype=dtype)
     MV = np.zeros_like(V)
     H = np.zeros((m, m), dtype=dtype)
-    v = v0.astype(dtype, copy=True)
-    v /= np.sqrt(np.real(np.vdot(v, M @ v)))
-    V[:, 0], MV[:, 0] = v, M @ v
-    start, n_op = 0, 0
-    keep = min(k + (m - k) // 2, m - 1)
+    start = np.asarray(v0, dtype=dtype).reshape(n, -1)
+    if start.shape[1] < b:
+        extra = rng.standard_normal((n, b - start.shape[1])).astype(dtype)
+        start = np.concatenate([start, extra], axis=1)
+    V[:, :b], MV[:, :b], _, _ = _orthonormalize(start[:, :b], V[:, :0], MV[:, :0], M, rng)
+    cols, n_op = b, 0
     for _ in range(maxiter):
-        for j in range(start, m):
-            w = op(MV[:, j])
-            n_op += 1
-            h = MV[:, : j + 1].conj().T @ w
-            w -= V[:, : j + 1] @ h
-            h2 = MV[:, : j + 1].conj().T @ w  # second Gram-Schmidt pass
-            w -= V[:, : j + 1] @ h2
-            H[: j + 1, j] = h + h2
-            Mw = M @ w
-            beta = np.sqrt(max(np.real(np.vdot(w, Mw)), 0.0))
-            if j + 1 < m:
-                H[j + 1, j] = beta
-            if beta <= 1e-30 * np.abs(H[: j + 1, j]).max(initial=1.0):
-                # invariant subspace found: continue from a fresh orthogonal vector
-                beta = 0.0
-                if j + 1 < m:
-                    H[j + 1, j] = 0.0
-                w = np.random.default_rng(j).standard_normal(n).astype(dtype)
-                w -= V[:, : j + 1] @ (MV[:, : j + 1].conj().T @ w)
-                Mw = M @ w
-            w, Mw = w / np.sqrt(np.real(np.vdot(w, Mw))), Mw / np.sqrt(np.real(np.vdot(w, Mw)))
-            V[:, j + 1], MV[:, j + 1] = w, Mw
+        while cols <= m:
+            W = op(MV[:, cols - b: cols])
+            n_op += b
+            Q, MQ, C, R = _orthonormalize(W, V[:, :cols], MV[:, :cols], M, rng)
+            H[:cols, cols - b: cols] = C
+            if cols + b <= m:
+                H[cols: cols + b, cols - b: cols] = R
+            else:
+                B = R
+            V[:, cols: cols + b], MV[:, cols: cols + b] = Q, MQ
+            cols += b
         theta, S = scipy.linalg.eigh((H + H.conj().T) / 2)
         theta, S = theta[::-1], S[:, ::-1]
-        resid = np.abs(beta * S[m - 1, :k])
+        resid = np.linalg.norm(B @ S[m - b: m, :k], axis=0)
         if np.all(resid <= tol * np.abs(theta[:k])):
             break
-        V[:, :keep] = V[:, :m] @ S[:, :keep]
-        MV[:, :keep] = MV[:, :m] @ S[:, :keep]
-        V[:, keep], MV[:, keep] = V[:, m], MV[:, m]
+        V[:, :p] = V[:, :m] @ S[:, :p]
+        MV[:, :p] = MV[:, :m] @ S[:, :p]
+        V[:, p: p + b], MV[:, p: p + b] = V[:, m:], MV[:, m:]
         H[:] = 0
-        H[:keep, :keep] = np.diag(theta[:keep])
-        H[keep, :keep] = beta * S[m - 1, :keep]
-        start = keep
+        H[:p, :p] = np.diag(theta[:p])
+        H[p: p + b, :p] = B @ S[m - b: m, :p]
+        cols = p + b
     else:
-        logger.warning("Lanczos did not converge in %d restarts (residuals %s)", maxiter, resid.max())
+        logger.warning("Lanczos did not converge in %d restarts (residual %.1e)", maxiter, resid.max())
     return theta[:k], V[:, :m] @ S[:, :k], n_op
 
 
@@ -207,7 +246,7 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
 class _Eigsh(torch.autograd.Function):
     @staticmethod
     def forward(ctx, a_values, m_values, a_data, m_data, k, sigma, method, tol, maxiter, ncv,
-                v0, degeneracy_rtol):
+                v0, degeneracy_rtol, block_size):
         A = a_data.to_scipy()
         M = m_data.to_scipy().astype(A.real.dtype)
         if sigma is None:
@@ -221,8 +260,9 @@ class _Eigsh(torch.autograd.Function):
             K = (A - sigma * M).tocsc()
             ctx.factor = factorize(K, "auto", hermitian=True)
             v0 = np.random.default_rng(0).standard_normal(A.shape[0]) if v0 is None else v0
-            _, X, n_op = _lanczos(lambda b: ctx.factor.solve(b), M, A.shape[0], k, A.dtype,
-                                  ncv=ncv or max(2 * k + 1, 20), tol=tol, maxiter=maxiter, v0=v0)
+            block = block_size or min(k, 6)
+            _, X, n_op = _lanczos(ctx.factor.solve, M, A.shape[0], k, A.dtype, ncv=ncv or 2 * k + block,
+                                  block=block, tol=tol, maxiter=maxiter, v0=v0)
             logger.debug("Lanczos: %d solves for k=%d", n_op, k)
             lam, X = _rayleigh_ritz(A, M, X)
         X = _fix_phase(X)
@@ -250,7 +290,7 @@ class _Eigsh(torch.autograd.Function):
         if ctx.needs_input_grad[1]:
             left = -U * lam.to(X.dtype) - 0.5 * X * norm_term.to(X.dtype)
             grad_m = _pattern_outer(left, X, ctx.m_data).real.to(ctx.m_data.dtype)
-        return (grad_a, grad_m) + (None,) * 10
+        return (grad_a, grad_m) + (None,) * 11
 
 
 def _phase_corrected(X: torch.Tensor, G: torch.Tensor) -> torch.Tensor:
@@ -316,6 +356,7 @@ def eigsh(
     ncv: int | None = None,
     v0: np.ndarray | None = None,
     degeneracy_rtol: float | None = None,
+    block_size: int | None = None,
 ) -> EigenPairs:
     r"""The ``k`` smallest eigenpairs of :math:`A x = \lambda M x`, differentiable.
 
@@ -336,7 +377,11 @@ def eigsh(
         Relative Ritz residual of the shift-inverted operator; default ``1e-12``
         (float64) or ``1e-6`` (float32).
     maxiter, ncv, v0
-        Lanczos restarts, basis size (default ``max(2k+1, 20)``), start vector.
+        Lanczos restarts, basis size (default ``2k + block_size``), start vector(s).
+    block_size : int, optional
+        Lanczos block size, default ``min(k, 6)``: eigenvalues of multiplicity up to the
+        block size are all found (symmetric meshes such as icospheres have clusters of
+        up to 5 or 6); blocks also use the faster multi-right-hand-side solves.
     degeneracy_rtol : float, optional
         Relative gap under which two eigenvalues count as degenerate in the eigenvector
         backward; default ``sqrt(eps)``.
@@ -362,5 +407,5 @@ def eigsh(
     tol = (1e-12 if eps < 1e-10 else 1e-6) if tol is None else tol
     degeneracy_rtol = eps ** 0.5 if degeneracy_rtol is None else degeneracy_rtol
     lam, X = _Eigsh.apply(a_data.values, m_data.values, a_data, m_data, k, sigma, method, tol,
-                          maxiter, ncv, v0, degeneracy_rtol)
+                          maxiter, ncv, v0, degeneracy_rtol, block_size)
     return EigenPairs(lam, X)
