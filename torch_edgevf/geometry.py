@@ -128,13 +128,13 @@ def face_geometry(verts, faces) -> FaceGeometry:
     faces = faces.to(verts.device)
     if int(faces.max()) >= verts.shape[0]:
         raise ValueError(f"faces reference vertex {int(faces.max())} but verts has {verts.shape[0]} rows")
-    p = verts[faces]  # (F, 3, 3)
-    # edge_vec[:, k] runs from corner k+1 to corner k+2 (the edge opposite corner k)
-    edge_vec = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]
-    lengths = torch.linalg.vector_norm(edge_vec, dim=-1)
-    double_area = torch.linalg.vector_norm(torch.linalg.cross(edge_vec[:, 0], edge_vec[:, 1]), dim=-1)
-    # vectors leaving corner k: towards k+1 is -edge_vec[k+2], towards k+2 is edge_vec[k+1]
-    dots = -(edge_vec[:, [2, 0, 1]] * edge_vec[:, [1, 2, 0]]).sum(-1)
+    p0, p1, p2 = (verts.index_select(0, faces[:, k]) for k in range(3))
+    # e_k runs from corner k+1 to corner k+2 (the edge opposite corner k)
+    e0, e1, e2 = p2 - p1, p0 - p2, p1 - p0
+    lengths = torch.stack([torch.linalg.vector_norm(e, dim=-1) for e in (e0, e1, e2)], dim=1)
+    double_area = torch.linalg.vector_norm(torch.linalg.cross(e0, e1), dim=-1)
+    # vectors leaving corner k: towards k+1 is -e_{k+2}, towards k+2 is e_{k+1}
+    dots = -torch.stack([(e2 * e1).sum(-1), (e0 * e2).sum(-1), (e1 * e0).sum(-1)], dim=1)
     return _checked(FaceGeometry(lengths, double_area, dots))
 
 
@@ -210,18 +210,40 @@ def transport_coefficients(verts, topo, n: int = 1, geom: FaceGeometry | None = 
     return pair_transport(geom, topo.face_edge_signs.to(verts.device), n).reshape(-1, 3, 3)
 
 
+_PAIR_INDEX = {name: torch.as_tensor(arr) for name, arr in (("a", PAIR_A), ("b", PAIR_B), ("c", PAIR_C))}
+
+
+def pair_columns(x: torch.Tensor, which: str) -> torch.Tensor:
+    """``x[:, PAIR_<which>]`` for an ``(F, 3)`` tensor, as a fast ``index_select``."""
+    return x.index_select(1, _PAIR_INDEX[which].to(x.device))
+
+
+def _int_power(u: torch.Tensor, n: int) -> torch.Tensor:
+    """``u ** n`` for an integer ``n >= 0`` by repeated squaring (differentiable)."""
+    result, base = None, u
+    while n:
+        if n & 1:
+            result = base if result is None else result * base
+        n >>= 1
+        if n:
+            base = base * base
+    return torch.ones_like(u) if result is None else result
+
+
 def pair_transport(geom: FaceGeometry, signs: torch.Tensor, n: int = 1) -> torch.Tensor:
-    """(F, 9) ``r_ab ** n`` for the 9 ordered corner pairs (row-major ``3a + b``)."""
-    angles = geom.angles
-    dev = angles.device
-    c = torch.as_tensor(PAIR_C, device=dev)
-    sigma = torch.as_tensor(PAIR_SIGMA, dtype=angles.dtype, device=dev)
-    s = signs.to(angles.dtype)
-    sign = -s[:, PAIR_A] * s[:, PAIR_B]
+    """(F, 9) ``r_ab ** n`` for the 9 ordered corner pairs (row-major ``3a + b``).
+
+    Computed without trigonometry: ``e^{i sigma alpha_c} = (d_c + i sigma 2A) / (l_a l_b)``.
+    """
+    dev, dtype = geom.lengths.device, geom.lengths.dtype
     off = torch.as_tensor(OFF_DIAGONAL, device=dev)
-    sign = torch.where(off, sign, torch.ones_like(sign)) ** n
-    phase = n * sigma * angles[:, c]
-    return torch.polar(torch.ones_like(phase), phase) * sign
+    sigma = torch.as_tensor(PAIR_SIGMA, dtype=dtype, device=dev)
+    denom = torch.where(off, pair_columns(geom.lengths, "a") * pair_columns(geom.lengths, "b"), 1.0)
+    re = torch.where(off, pair_columns(geom.dots, "c") / denom, 1.0)
+    im = sigma * geom.double_area[:, None] / denom
+    s = signs.to(dtype)
+    sign = torch.where(off, -pair_columns(s, "a") * pair_columns(s, "b"), 1.0) ** n
+    return _int_power(torch.complex(re, im), n) * sign
 
 
 def dihedral_angles(verts, topo) -> torch.Tensor:

@@ -77,12 +77,13 @@ class EdgeOperators(nn.Module):
         geom = face_geometry(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         mass_values = ops._mass_values(geom, topo)
-        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
+        r1 = ops.pair_transport(geom, signs, 1)
+        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs, r1))
         e = self.edges.to(verts.device)
         self.verts = verts
         self.mass = ops.diagonal(mass_values)
         self.connection_laplacian = ops._pattern(topo, "EE").assemble(
-            ops._connection_laplacian_values(geom, signs, self.n)
+            ops._connection_laplacian_values(geom, signs, self.n, r1)
         )
         self.gradient = gradient
         self.curl_div = ops._pattern(topo, "FE").assemble(ops._curl_values(geom, signs))

@@ -34,7 +34,9 @@ from .geometry import (
     PAIR_C,
     FaceGeometry,
     _topology_and_verts,
+    _int_power,
     face_geometry,
+    pair_columns,
     pair_transport,
 )
 from .topology import Topology
@@ -83,7 +85,11 @@ def _pattern(topo: Topology, name: str) -> Pattern:
 
 
 def _laplace_beltrami_plan(topo: Topology):
-    """For ``L = G^H M_z^{-1} G``: pairs of nonzeros of G within each row, and their pattern."""
+    """For ``L = Re(G^H M_z^{-1} G)``: the pairs of nonzeros of G within each row, and their pattern.
+
+    Returns ``(pattern, p, q, rows)``: contribution ``i`` is ``Re(conj(g[p_i]) g[q_i])`` of the
+    values ``g`` of G scaled by ``1 / sqrt(m_row)``; ``rows`` is the row of each nonzero of G.
+    """
 
     def build():
         ev = _pattern(topo, "EV")
@@ -95,11 +101,11 @@ def _laplace_beltrami_plan(topo: Topology):
         pos = start[:, None] + k[None, :]
         valid = k[None, :] < counts[:, None]
         mask = valid[:, :, None] & valid[:, None, :]
-        p = np.broadcast_to(pos[:, :, None], mask.shape)[mask]
-        q = np.broadcast_to(pos[:, None, :], mask.shape)[mask]
-        edge = np.broadcast_to(np.arange(topo.num_edges)[:, None, None], mask.shape)[mask]
+        index = np.int32 if ev.nnz < 2**31 - 1 else np.int64
+        p = np.broadcast_to(pos[:, :, None], mask.shape)[mask].astype(index)
+        q = np.broadcast_to(pos[:, None, :], mask.shape)[mask].astype(index)
         pattern = Pattern(cols[p], cols[q], (topo.num_vertices, topo.num_vertices))
-        return pattern, torch.from_numpy(p.copy()), torch.from_numpy(q.copy()), torch.from_numpy(edge.copy())
+        return pattern, torch.from_numpy(p), torch.from_numpy(q), torch.from_numpy(rows.copy())
 
     return topo.cached(("plan", "laplace_beltrami"), build)
 
@@ -146,26 +152,28 @@ def _mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
     return geom.area.new_zeros(topo.num_edges).index_add(0, fe.flatten(), third.flatten())
 
 
-def _connection_laplacian_values(geom: FaceGeometry, signs: torch.Tensor, n: int) -> torch.Tensor:
+def _connection_laplacian_values(geom: FaceGeometry, signs: torch.Tensor, n: int, r1=None) -> torch.Tensor:
+    """Per-face ``L_c^(n)`` contributions; ``r1`` is ``pair_transport(geom, signs, 1)`` if known."""
     a2 = geom.double_area[:, None]
     off = torch.as_tensor(OFF_DIAGONAL, device=a2.device)
     real = torch.where(
-        off, -2 * geom.dots[:, _C] / a2, 2 * geom.lengths[:, _A] ** 2 / a2
+        off, -2 * pair_columns(geom.dots, "c") / a2, 2 * pair_columns(geom.lengths, "a") ** 2 / a2
     )
     if n == 0:
         return real.flatten()
-    return (real * pair_transport(geom, signs, n).conj()).flatten()
+    r = pair_transport(geom, signs, n) if r1 is None else _int_power(r1, n)
+    return (real * r.conj()).flatten()
 
 
-def _gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
-    r = pair_transport(geom, signs, 1)
-    scale = signs[:, _B] * geom.lengths[:, _B] / 6
+def _gradient_values(geom: FaceGeometry, signs: torch.Tensor, r1=None) -> torch.Tensor:
+    r = pair_transport(geom, signs, 1) if r1 is None else r1
+    scale = pair_columns(signs * geom.lengths, "b") / 6
     return (1j * scale * r.conj()).flatten()
 
 
 def _covariant_values(geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor) -> torch.Tensor:
     r = pair_transport(geom, signs, 1)
-    scale = -signs[:, _B] * geom.lengths[:, _B] / 3
+    scale = -pair_columns(signs * geom.lengths, "b") / 3
     return (scale * (w_pairs * r).imag * r.conj()).flatten()
 
 
@@ -307,7 +315,7 @@ def real_form(a: torch.Tensor) -> torch.Tensor:
 def _curl_energy_block(verts, topo) -> tuple[torch.Tensor, int]:
     verts, topo, geom, signs = _prepare(verts, topo)
     k = signs * geom.lengths
-    vals = 2 * k[:, _A] * k[:, _B] / geom.double_area[:, None]
+    vals = 2 * pair_columns(k, "a") * pair_columns(k, "b") / geom.double_area[:, None]
     return _pattern(topo, "EE").assemble(vals.flatten()), topo.num_edges
 
 
@@ -331,10 +339,10 @@ def div_energy(verts, topo) -> torch.Tensor:
 
 
 def _laplace_beltrami_from(g_values: torch.Tensor, mass: torch.Tensor, topo: Topology) -> torch.Tensor:
-    pattern, p, q, edge = _laplace_beltrami_plan(topo)
+    pattern, p, q, rows = _laplace_beltrami_plan(topo)
     dev = g_values.device
-    p, q, edge = p.to(dev), q.to(dev), edge.to(dev)
-    vals = (g_values[p].conj() * g_values[q]).real / mass[edge]
+    scaled = g_values / torch.sqrt(mass).index_select(0, rows.to(dev))
+    vals = (scaled.index_select(0, p.to(dev)).conj() * scaled.index_select(0, q.to(dev))).real
     return pattern.assemble(vals)
 
 
@@ -404,7 +412,7 @@ def covariant_derivative(verts, topo, w) -> torch.Tensor:
 
 
 def _covariant_from(geom, signs, topo, w) -> torch.Tensor:
-    w_pairs = w[topo.face_edges.to(w.device)[:, _A]]
+    w_pairs = w[pair_columns(topo.face_edges.to(w.device), "a")]
     return _pattern(topo, "EE").assemble(_covariant_values(geom, signs, w_pairs))
 
 
@@ -420,7 +428,7 @@ def cotan_laplacian(verts, topo) -> torch.Tensor:
     verts, topo, geom, _ = _prepare(verts, topo)
     cot = geom.cotangents
     off = torch.as_tensor(OFF_DIAGONAL, device=cot.device)
-    diag = 0.5 * (cot[:, (_A + 1) % 3] + cot[:, (_A + 2) % 3])
-    vals = torch.where(off, -0.5 * cot[:, _C], diag)
+    diag = 0.5 * (cot.sum(1, keepdim=True) - pair_columns(cot, "a"))
+    vals = torch.where(off, -0.5 * pair_columns(cot, "c"), diag)
     return _pattern(topo, "VV").assemble(vals.flatten())
 

@@ -202,6 +202,11 @@ def _check_indices(f: np.ndarray, num_vertices: int | None) -> int:
 
 def _check_duplicate_faces(f: np.ndarray) -> None:
     key = np.sort(f, axis=1)
+    n = int(key.max()) + 1
+    if n < 2**21:  # fast path: one int64 key per face
+        packed = np.sort((key[:, 0] * n + key[:, 1]) * n + key[:, 2])
+        if not (packed[1:] == packed[:-1]).any():
+            return
     _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
     if (counts > 1).any():
         dup_keys = key[first[counts > 1]]
