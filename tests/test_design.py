@@ -266,6 +266,16 @@ def test_soft_alignment_trades_alignment_for_smoothness(designer):
     assert abs(rayleigh[-1] - lam1) < 1e-3 * lam1
 
 
+def test_alignment_above_the_first_eigenvalue_warns(designer, caplog):
+    lam1 = float(designer.smoothest(return_eigenvalue=True)[1])
+    w = torch.ones(designer.num_edges, dtype=C128)
+    with caplog.at_level("WARNING", logger="torch_edgevf.design"):
+        z = designer.aligned(w, 1.5 * lam1)
+    assert "is not below the first eigenvalue" in caplog.text
+    residual = (designer.laplacian @ z[:, None])[:, 0] - 1.5 * lam1 * designer.mass * z - designer.mass * w
+    assert float(residual.abs().max()) < 1e-8
+
+
 def test_alignment_errors(designer):
     with pytest.raises(ValueError, match="guide is zero everywhere"):
         designer.aligned(torch.zeros(designer.num_edges, dtype=C128))

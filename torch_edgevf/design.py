@@ -394,7 +394,8 @@ class FieldDesigner:
         from ``-inf`` (``z -> w / |lambda_t|``, pure alignment) towards the first eigenvalue
         ``lambda_1`` (``z`` tends to the projection of ``w`` on the smoothest fields), and
         ``lambda_t = 0`` is the thesis's default trade-off. Needs ``lambda_t < lambda_1``
-        (the system is then positive definite). The factorization of ``L_c - lambda_t M_z``
+        (the system is then positive definite; otherwise a warning is logged and the
+        stationary point of the indefinite energy is returned). The factorization of ``L_c - lambda_t M_z``
         is kept for the next call with the same ``lambda_t``.
 
         Parameters
@@ -411,6 +412,11 @@ class FieldDesigner:
         if not bool((w.detach() != 0).any()):
             raise ValueError("guide is zero everywhere: there is nothing to align to")
         solver = self._solver(("aligned", lam), lambda: self._shifted(-lam))
+        if solver.backend == "superlu":  # the Cholesky path failed: not positive definite
+            log.warning(
+                "lam = %g is not below the first eigenvalue: L_c - lam M_z is indefinite and the "
+                "result is a stationary point of the energy, not its minimiser", lam
+            )
         return solver.solve(self.mass * w)
 
     def _shifted(self, shift: float) -> torch.Tensor:
@@ -450,17 +456,20 @@ class FieldDesigner:
         z = self._field(z0, "z0")
         if t == 0:
             return z
-        t_phys = t * float(self.mean_edge_length.detach()) ** 2
+        return self._diffuse(z, t * self.mean_edge_length ** 2, method, steps)
+
+    def _diffuse(self, z: torch.Tensor, t_phys: torch.Tensor, method: str, steps: int) -> torch.Tensor:
+        """Diffusion for the physical time ``t_phys`` (a tensor: differentiable in ``verts``)."""
         if method == "exponential":
             return expm_multiply(self.laplacian, self.mass, z, t_phys)
         dt = t_phys / steps
-        solver = self._solver(("implicit", dt), lambda: self._heat_matrix(dt))
+        solver = self._solver(("implicit", float(dt.detach())), lambda: self._heat_matrix(dt))
         m = self.mass if z.dim() == 1 else self.mass[:, None]
         for _ in range(steps):
             z = solver.solve(m * z)
         return z
 
-    def _heat_matrix(self, dt: float) -> torch.Tensor:
+    def _heat_matrix(self, dt: torch.Tensor) -> torch.Tensor:
         lap = self.laplacian
         scaled = sparse_coo(lap.indices(), dt * lap.values(), lap.shape)
         return _sum_sparse([scaled, ops.diagonal(self.mass.to(self.complex_dtype))])
@@ -513,21 +522,20 @@ class FieldDesigner:
             raise ValueError(f"curvature directions form a line field: n must be even, got n = {self.n}")
         if weighting not in ("integrated", "thesis"):
             raise ValueError(f"weighting must be 'integrated' or 'thesis', got {weighting!r}")
-        if diffusion_time is None:
-            area = float(self._geom.area.detach().sum())
-            radius = math.sqrt(area / (4 * math.pi))
-            t = radius / (10 * float(self.mean_edge_length.detach()))
+        if diffusion_time is None:  # t = h R / 10 physically, R = sqrt(area / 4 pi)
+            radius = torch.sqrt(self._geom.area.sum() / (4 * math.pi))
+            t_phys = self.mean_edge_length * radius / 10
         else:
-            t = _check_real(diffusion_time, "diffusion_time", 0.0)
+            t_phys = _check_real(diffusion_time, "diffusion_time", 0.0) * self.mean_edge_length ** 2
         beta = dihedral_angles(self.verts, self.topology)
         length = edge_lengths(self.verts, self.topology)
         if weighting == "integrated":
             z2 = torch.complex(-beta * length / (3 * self.mass), torch.zeros_like(beta))
         else:
             z2 = nth_power(torch.complex(torch.zeros_like(beta), beta / length), 2)
-        if t > 0:
+        if diffusion_time is None or diffusion_time > 0:
             designer2 = self if self.n == 2 else self._companion(2)
-            z2 = designer2.diffuse(z2, t, method="implicit", steps=4)
+            z2 = designer2._diffuse(z2, t_phys, "implicit", 4)
         return z2 if self.n == 2 else nth_power(z2, self.n // 2)
 
     def _companion(self, n: int) -> "FieldDesigner":
@@ -581,8 +589,7 @@ def _check_pairs(edges, values, ne: int, e_name: str, v_name: str, cdtype, dev):
         raise ValueError(
             f"{e_name} out of range (the mesh has {ne} edges): {list_some(edges[bad].tolist())}"
         )
-    values = _as_complex(torch.as_tensor(values, device=dev) if not isinstance(values, torch.Tensor) else values, v_name)
-    values = values.reshape(-1) if values.dim() == 0 else values
+    values = _as_complex(torch.as_tensor(values, device=dev), v_name)
     if values.shape != edges.shape:
         raise ValueError(
             f"{v_name} must have one value per edge of {e_name}: shape {tuple(edges.shape)}, "
