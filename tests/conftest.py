@@ -1,6 +1,13 @@
 """Shared fixtures: small meshes with fixed seeds and the path of the shared real meshes."""
 
-from pathlib import Path
+import os
+
+# Small dense problems in the tests run far faster single-threaded, and busy-waiting
+# OpenMP threads slow everything down on a shared 2-core machine.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from pathlib import Path  # noqa: E402
 
 import numpy as np
 import pytest
