@@ -1,6 +1,8 @@
 """Benchmark of torch_edgevf.linalg against SciPy on the connection Laplacian.
 
-Run: ``python benchmarks/bench_linalg.py [--level 6] [--mesh path.obj] [--k 24]``
+Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_linalg.py [--level 6] [--mesh path.obj] [--k 24]``
+(single-threaded BLAS: on an oversubscribed machine OpenBLAS threads spin on the small
+dense Lanczos matrices and slow them down 30x).
 
 Prints a markdown table per mesh and back-end (CHOLMOD when scikit-sparse is installed,
 and the pip-only SuperLU path), with ratios:
@@ -123,10 +125,11 @@ def main():
     bench(f"icosphere {args.level}", *icosphere(args.level), args.k, rows)
     if args.mesh.exists():
         bench(args.mesh.stem, *load(args.mesh), args.k, rows)
-    print("| mesh | edges | back-end | ours | time (s) | reference | time (s) | ratio ref/ours |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| mesh | edges | back-end | ours | time (s) | reference | time (s) | ref/ours | ours/ref |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for mesh, n, backend, what, t, ref, t_ref in rows:
-        print(f"| {mesh} | {n} | {backend} | {what} | {t:.3f} | {ref} | {t_ref:.3f} | {t_ref / t:.2f} |")
+        print(f"| {mesh} | {n} | {backend} | {what} | {t:.3f} | {ref} | {t_ref:.3f} | {t_ref / t:.2f} "
+              f"| {t / t_ref:.2f} |")
 
 
 if __name__ == "__main__":
