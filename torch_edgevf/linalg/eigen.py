@@ -53,7 +53,15 @@ import scipy.linalg
 import scipy.sparse as sp
 import torch
 
-from ._utils import SparseData, as_diagonal_or_sparse, as_sparse, from_numpy, real_dtype, to_numpy
+from ._utils import (
+    SparseData,
+    as_diagonal_or_sparse,
+    as_sparse,
+    blas_single_thread,
+    from_numpy,
+    real_dtype,
+    to_numpy,
+)
 from .factor import factorize
 
 logger = logging.getLogger(__name__)
@@ -245,6 +253,7 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
 
 class _Eigsh(torch.autograd.Function):
     @staticmethod
+    @blas_single_thread
     def forward(ctx, a_values, m_values, a_data, m_data, k, sigma, method, tol, maxiter, ncv,
                 v0, degeneracy_rtol, block_size):
         A = a_data.to_scipy()
@@ -275,6 +284,7 @@ class _Eigsh(torch.autograd.Function):
         return lam_t, X_t
 
     @staticmethod
+    @blas_single_thread
     def backward(ctx, g_lam, g_X):
         lam, X = ctx.saved_tensors
         U = torch.zeros_like(X)
