@@ -202,12 +202,33 @@ def _scipy(a: torch.Tensor) -> sp.csc_matrix:
     return sp.csc_matrix((a.values().detach().resolve_conj().numpy(), (i[0], i[1])), shape=tuple(a.shape))
 
 
+def _single_threaded_blas():
+    """Limit BLAS to one thread if threadpoolctl is installed (else a no-op context).
+
+    ARPACK's complex iteration makes many small BLAS calls; with a multi-threaded
+    OpenBLAS on a busy machine each call can wait for its threads, which measured 15x
+    slower than single-threaded here.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        import contextlib
+
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
 def _smallest_eigenpairs(A: sp.spmatrix, mass: np.ndarray, k: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """``k`` smallest eigenpairs of ``A x = lambda diag(mass) x``, ``X^H M X = I``.
 
     Shift-invert ARPACK on the symmetrised ``M^{-1/2} A M^{-1/2}`` (fast for the
     precomputation; no gradients are needed here), dense for small matrices.
     """
+    with _single_threaded_blas():
+        return _smallest_eigenpairs_impl(A, mass, k, tol)
+
+
+def _smallest_eigenpairs_impl(A: sp.spmatrix, mass: np.ndarray, k: int, tol: float):
     n = A.shape[0]
     s = 1.0 / np.sqrt(mass)
     B = (sp.diags(s) @ A @ sp.diags(s)).tocsc()
@@ -218,7 +239,8 @@ def _smallest_eigenpairs(A: sp.spmatrix, mass: np.ndarray, k: int, tol: float) -
         w, Y = w[:k], Y[:, :k]
     else:
         sigma = -1e-6 * float(np.abs(B.diagonal()).max())
-        w, Y = sla.eigsh(B, k=k, sigma=sigma, which="LM", tol=tol, v0=np.ones(n, dtype=B.dtype))
+        ncv = min(n - 1, max(2 * k + 1, 40))  # ARPACK's default 2k+1 restarts endlessly for small k
+        w, Y = sla.eigsh(B, k=k, sigma=sigma, which="LM", tol=tol, ncv=ncv, v0=np.ones(n, dtype=B.dtype))
         order = np.argsort(w)
         w, Y = w[order], Y[:, order]
     return np.maximum(w, 0.0), Y * s[:, None]
@@ -703,6 +725,7 @@ def repair_degenerate_faces(verts, faces) -> tuple[np.ndarray, np.ndarray, np.nd
         if len(bad) == 0:
             break
         t = int(bad[0])
+        original = int(orig_face[t])
         p = v[f[t]].astype(np.float64)
         lengths = np.linalg.norm(p[[2, 0, 1]] - p[[1, 2, 0]], axis=1)  # opposite each corner
         done = False
@@ -718,8 +741,8 @@ def repair_degenerate_faces(verts, faces) -> tuple[np.ndarray, np.ndarray, np.nd
             if done:
                 break
         if not done:
-            raise ValueError(f"cannot repair the zero-area face {int(orig_face[t])}: no valid edge collapse")
-        repaired.append(int(orig_face[t]))
+            raise ValueError(f"cannot repair the zero-area face {original}: no valid edge collapse")
+        repaired.append(original)
     used = np.unique(f)
     remap = np.full(len(v), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))

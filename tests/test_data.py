@@ -1,0 +1,286 @@
+"""Data: per-mesh operators, the on-disk cache, batching (with DataLoader workers), PSB."""
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg
+import torch
+
+import torch_edgevf
+import torch_edgevf as ev
+from torch_edgevf import data
+
+from conftest import perturbed_icosphere
+
+PSB = data.DEFAULT_PSB_PATH
+
+
+@pytest.fixture(scope="module")
+def two_meshes():
+    out = []
+    for level, seed in ((1, 0), (2, 1)):
+        v, f = perturbed_icosphere(level, 0.05, seed=seed)
+        o = data.compute_operators(v, f, k_edge=8, k_vertex=6, vertex_gradient=True)
+        x = data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=4, area=o.face_area.sum())
+        out.append(data.MeshSample(o, x, level, level))
+    return out
+
+
+def _dense_pairs(A, m, k):
+    w, X = scipy.linalg.eigh(A.to_dense().numpy(), np.diag(m.numpy()))
+    return w[:k], X[:, :k]
+
+
+@pytest.mark.parametrize("level", [1, 2])  # dense path (E = 120) and ARPACK path (E = 480)
+def test_compute_operators_eigenpairs(level):
+    v, f = perturbed_icosphere(level, 0.05, seed=2)
+    o = data.compute_operators(v, f, k_edge=6, k_vertex=5, vertex_laplacian="edge")
+    o.check()
+    topo = ev.Topology(f, v.shape[0])
+    w, X = _dense_pairs(ev.connection_laplacian(v, topo, 1), o.edge_mass, 6)
+    np.testing.assert_allclose(o.edge_evals.numpy(), w, rtol=1e-8, atol=1e-8)
+    gram = o.edge_evecs.conj().T @ (o.edge_mass[:, None] * o.edge_evecs)
+    torch.testing.assert_close(gram, torch.eye(6, dtype=gram.dtype), atol=1e-8, rtol=0)
+    # same subspace as the dense eigenvectors
+    P = X @ X.conj().T @ np.diag(o.edge_mass.numpy())
+    np.testing.assert_allclose(P @ o.edge_evecs.numpy(), o.edge_evecs.numpy(), atol=1e-6)
+    wv, _ = _dense_pairs(ev.laplace_beltrami(v, topo), o.vertex_mass, 5)
+    np.testing.assert_allclose(o.vertex_evals.numpy(), np.maximum(wv, 0), rtol=1e-8, atol=1e-8)
+    assert o.vertex_gradient is None and o.gradient.shape == (topo.num_edges, topo.num_vertices)
+
+
+def test_heat_kernel_signature_invariances():
+    v, f = perturbed_icosphere(1, 0.05, seed=3)
+    o = data.compute_operators(v, f, k_edge=4, k_vertex=8)
+    o2 = data.compute_operators(3.0 * v, f, k_edge=4, k_vertex=8)
+    h = data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=5, area=o.face_area.sum())
+    h2 = data.heat_kernel_signature(o2.vertex_evals, o2.vertex_evecs, count=5, area=o2.face_area.sum())
+    torch.testing.assert_close(h2, h)  # scale normalised
+    flipped = o.vertex_evecs * torch.tensor([1.0, -1.0] * 4, dtype=torch.float64)
+    torch.testing.assert_close(data.heat_kernel_signature(o.vertex_evals, flipped, count=5), data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=5))
+    with pytest.raises(ValueError, match="do not match"):
+        data.heat_kernel_signature(o.vertex_evals[:3], o.vertex_evecs)
+
+
+# --------------------------------------------------------------------------- batching
+
+
+def test_collate_offsets_and_block_diagonal(two_meshes):
+    a, b = two_meshes
+    batch = data.collate_meshes([a, b])
+    oa, ob = a.operators, b.operators
+    assert batch.num_meshes == 2
+    assert batch.vertex_offsets.tolist() == [0, oa.num_vertices, oa.num_vertices + ob.num_vertices]
+    assert batch.edge_offsets.tolist() == [0, oa.num_edges, oa.num_edges + ob.num_edges]
+    assert batch.labels.tolist() == [1, 2] and batch.indices.tolist() == [1, 2]
+    assert torch.equal(batch.edges[oa.num_edges:], ob.edges + oa.num_vertices)
+    assert torch.equal(batch.faces[oa.num_faces:], ob.faces + oa.num_vertices)
+    assert torch.equal(batch.face_edges[oa.num_faces:], ob.face_edges + oa.num_edges)
+    assert torch.equal(batch.edge_batch, torch.tensor([0] * oa.num_edges + [1] * ob.num_edges))
+    assert torch.equal(batch.face_batch.bincount(), torch.tensor([oa.num_faces, ob.num_faces]))
+    G = batch.gradient.to_dense()
+    torch.testing.assert_close(G[:oa.num_edges, :oa.num_vertices], oa.gradient.to_dense())
+    torch.testing.assert_close(G[oa.num_edges:, oa.num_vertices:], ob.gradient.to_dense())
+    assert G[:oa.num_edges, oa.num_vertices:].abs().max() == 0
+    # block-diagonal products equal per-mesh products
+    f = torch.randn(batch.num_vertices, 2, dtype=torch.float64)
+    gz = batch.gradient @ f.to(torch.complex128)
+    torch.testing.assert_close(gz[oa.num_edges:], ob.gradient @ f[oa.num_vertices:].to(torch.complex128))
+    Lc = batch.connection_laplacian.to_dense()
+    torch.testing.assert_close(Lc[oa.num_edges:, oa.num_edges:], ob.connection_laplacian.to_dense())
+    assert batch.edge_evals.shape == (2, 8) and batch.edge_evecs.shape == (batch.num_edges, 8)
+    assert batch.vertex_gradient.shape == (batch.num_vertices, batch.num_vertices)
+
+
+def test_collate_errors(two_meshes):
+    a, b = two_meshes
+    with pytest.raises(ValueError, match="at least one"):
+        data.collate_meshes([])
+    with pytest.raises(ValueError, match="MeshSample"):
+        data.collate_meshes([a, (1, 2)])
+    with pytest.raises(ValueError, match="features"):
+        data.collate_meshes([data.MeshSample(a.operators, a.features[:-1], 0)])
+    with pytest.raises(ValueError, match="feature channels"):
+        data.collate_meshes([a, data.MeshSample(b.operators, b.features[:, :2], 0)])
+    other = data.compute_operators(b.operators.verts, b.operators.faces, k_edge=5, k_vertex=6)
+    with pytest.raises(ValueError, match="eigenpairs"):
+        data.collate_meshes([a, data.MeshSample(other, b.features, 0)])
+    with pytest.raises(ValueError, match="labels"):
+        data.collate_meshes([a, data.MeshSample(b.operators, b.features, torch.zeros(3))])
+
+
+def test_dataloader_with_two_workers(two_meshes):
+    samples = list(two_meshes) * 3
+    loader = torch.utils.data.DataLoader(samples, batch_size=2, shuffle=False, num_workers=2,
+                                         collate_fn=data.collate_meshes)
+    batches = list(loader)
+    assert len(batches) == 3
+    for got in batches:
+        ref = data.collate_meshes(list(two_meshes))
+        assert torch.equal(got.edges, ref.edges) and torch.equal(got.labels, ref.labels)
+        torch.testing.assert_close(got.gradient.to_dense(), ref.gradient.to_dense())
+        torch.testing.assert_close(got.edge_evecs, ref.edge_evecs)
+
+
+# --------------------------------------------------------------------------- cache
+
+
+@pytest.fixture
+def cache_setup(tmp_path):
+    v, f = perturbed_icosphere(1, 0.05, seed=7)
+    cache = data.OperatorCache(tmp_path / "cache")
+    options = dict(k_edge=4, k_vertex=3)
+    return v, f, cache, options
+
+
+def _equal(a, b):
+    for name in ("edges", "edge_mass", "edge_evals", "edge_evecs", "vertex_evals", "vertex_evecs"):
+        assert torch.equal(getattr(a, name), getattr(b, name)), name
+    assert torch.equal(a.gradient.to_dense(), b.gradient.to_dense())
+
+
+def test_cache_roundtrip_without_pickle(cache_setup, monkeypatch):
+    v, f, cache, options = cache_setup
+    first = cache.get(v, f, **options)
+    files = list(cache.root.iterdir())
+    assert len(files) == 1 and files[0].suffix == ".npz"  # no temporary files left
+    with np.load(files[0], allow_pickle=False) as d:
+        assert all(d[name].dtype != object for name in d.files)
+
+    def fail(*args, **kwargs):
+        raise AssertionError("recomputed although cached")
+
+    monkeypatch.setattr(data, "compute_operators", fail)
+    _equal(cache.get(v, f, **options), first)
+    # float64 positions are part of the key
+    v2 = v.clone()
+    v2[0, 0] += 1e-12
+    assert cache.path(cache.key(v2, f, **options)) != files[0]
+    assert cache.path(cache.key(v, f, k_edge=5, k_vertex=3)) != files[0]
+
+
+def _rebuilt(cache, v, f, options, caplog):
+    calls = []
+    real = data.compute_operators
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+        caplog.clear()
+        data.compute_operators = counting
+        try:
+            out = cache.get(v, f, **options)
+        finally:
+            data.compute_operators = real
+    assert calls == [1]
+    assert any("invalid" in r.getMessage() and "rebuilding" in r.getMessage() for r in caplog.records)
+    return out
+
+
+def test_cache_truncated_file_is_rebuilt(cache_setup, caplog):
+    v, f, cache, options = cache_setup
+    ref = cache.get(v, f, **options)
+    path = cache.path(cache.key(v, f, **options))
+    raw = path.read_bytes()
+    path.write_bytes(raw[: len(raw) // 2])
+    _equal(_rebuilt(cache, v, f, options, caplog), ref)
+    _equal(cache.get(v, f, **options), ref)  # and the rewritten entry is valid
+
+
+def test_cache_flipped_bytes_are_rebuilt(cache_setup, caplog):
+    v, f, cache, options = cache_setup
+    ref = cache.get(v, f, **options)
+    path = cache.path(cache.key(v, f, **options))
+    raw = bytearray(path.read_bytes())
+    for pos in range(len(raw) // 3, len(raw) // 3 + 8):  # inside the stored arrays
+        raw[pos] ^= 0xFF
+    path.write_bytes(bytes(raw))
+    _equal(_rebuilt(cache, v, f, options, caplog), ref)
+
+
+def test_cache_version_change_is_rebuilt(cache_setup, caplog, monkeypatch):
+    v, f, cache, options = cache_setup
+    cache.get(v, f, **options)
+    monkeypatch.setattr(torch_edgevf, "__version__", "0.0.0-other")
+    _rebuilt(cache, v, f, options, caplog)
+    assert any("version" in r.getMessage() for r in caplog.records)
+
+
+# --------------------------------------------------------------------------- progress
+
+
+def test_progress_is_quiet_under_pytest(capsys):
+    assert list(data.progress(range(3), desc="x")) == [0, 1, 2]
+    assert capsys.readouterr().err == ""
+    bar = data._SimpleBar(range(2), 2, "ops")
+    assert list(bar) == [0, 1]
+    assert "ops: 2/2" in capsys.readouterr().err
+    assert list(data.progress(range(2), desc="shown", enabled=True)) == [0, 1]
+    assert "shown" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- PSB and degenerate faces
+
+
+def _psb_mesh(pid):
+    if not PSB.exists():
+        pytest.skip("PSB file not available")
+    d = np.load(PSB, allow_pickle=False)
+    i = int(np.nonzero(d["psb_ids"] == pid)[0][0])
+    v = d["verts"][d["vert_offsets"][i]:d["vert_offsets"][i + 1]]
+    f = d["faces"][d["face_offsets"][i]:d["face_offsets"][i + 1]].astype(np.int64)
+    return v, f
+
+
+def test_repair_degenerate_face_of_psb_351():
+    v, f = _psb_mesh(351)
+    bad = data.find_degenerate_faces(v, f)
+    assert len(bad) == 1
+    with pytest.raises(ValueError, match="zero-area"):
+        ev.mass_matrix(torch.from_numpy(v.astype(np.float64)), f)
+    v2, f2, kept, repaired = data.repair_degenerate_faces(v, f)
+    assert repaired == [int(bad[0])]
+    assert len(data.find_degenerate_faces(v2, f2)) == 0
+    assert v2.shape[0] == v.shape[0] - 1 and f2.shape[0] == f.shape[0] - 2
+    np.testing.assert_array_equal(v2, v[kept])  # no vertex moved
+    t1, t2 = ev.Topology(f, v.shape[0]), ev.Topology(f2, v2.shape[0])
+    assert t2.euler_characteristic == t1.euler_characteristic
+    ev.mass_matrix(torch.from_numpy(v2.astype(np.float64)), f2)  # operators accept it
+
+
+def test_psb_dataset_degenerate_policies(caplog):
+    if not PSB.exists():
+        pytest.skip("PSB file not available")
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+        ds = data.PSBDataset(split="train", ids=[351], degenerate="skip")
+    assert len(ds) == 0 and ds.skipped == [351]
+    assert any("351" in r.getMessage() and "skipped" in r.getMessage() for r in caplog.records)
+    with pytest.raises(ValueError, match="351"):
+        data.PSBDataset(split="all", ids=[351], degenerate="error")
+    assert len(data.PSBDataset(split="test", ids=[351])) == 0  # 351 is in the training split
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+        ds = data.PSBDataset(split="all", ids=[351], k_edge=4, k_vertex=4, hks_count=3)
+    assert len(ds) == 1 and ds.repaired == [351] and ds.psb_ids == [351]
+    assert any("repaired" in r.getMessage() for r in caplog.records)
+    s = ds[0]
+    assert s.features.shape == (s.operators.num_vertices, 3) and s.features.dtype == torch.float32
+    assert ds.classes[s.label] == "bearing"
+
+
+def test_psb_dataset_errors(tmp_path):
+    with pytest.raises(ValueError, match="split"):
+        data.PSBDataset(split="val")
+    with pytest.raises(ValueError, match="not found"):
+        data.PSBDataset(path=tmp_path / "missing.npz")
+    with pytest.raises(ValueError, match="degenerate"):
+        data.PSBDataset(degenerate="ignore")
+    v, f = perturbed_icosphere(1, 0.05, seed=0)
+    with pytest.raises(ValueError, match="k_edge"):
+        data.compute_operators(v, f, k_edge=1000)
+    with pytest.raises(ValueError, match="vertex_laplacian"):
+        data.compute_operators(v, f, vertex_laplacian="fem")
