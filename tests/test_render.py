@@ -217,3 +217,16 @@ def test_errors(sphere, tmp_path):
     with pytest.raises(ValueError, match=r"vertices \[4\]"):
         render.render_mesh(bad, f, tmp_path / "x.png")
     assert not (tmp_path / "x.png").exists()
+
+
+def test_parametrization_from_param_module(sphere, tmp_path):
+    param = pytest.importorskip("torch_edgevf.param")
+    design = pytest.importorskip("torch_edgevf.design")
+    v, f, _ = sphere
+    result = param.parametrize(v, f, design.smoothest_field(v, f, 4))
+    img = read_png(render.render_parametrization(result.verts, result.faces, result.uv, tmp_path / "p.png",
+                                                 scale=1.0, size=SIZE))
+    assert_shows_mesh(img)
+    fg = foreground(img)
+    dark = (img[..., 2] > img[..., 0] + 0.2)[fg].mean()
+    assert 0.2 < dark < 0.8, f"checkerboard dark squares cover {dark:.0%}"
