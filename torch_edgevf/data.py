@@ -238,7 +238,9 @@ def _smallest_eigenpairs_impl(A: sp.spmatrix, mass: np.ndarray, k: int, tol: flo
         w, Y = scipy.linalg.eigh(B.toarray())
         w, Y = w[:k], Y[:, :k]
     else:
-        sigma = -1e-6 * float(np.abs(B.diagonal()).max())
+        # a shift just below 0, on the scale of typical entries: the max would put it far below the
+        # wanted eigenvalues on meshes with slivers (huge cotangents) and stall ARPACK
+        sigma = -1e-6 * float(np.median(np.abs(B.diagonal())))
         ncv = min(n - 1, max(2 * k + 1, 40))  # ARPACK's default 2k+1 restarts endlessly for small k
         w, Y = sla.eigsh(B, k=k, sigma=sigma, which="LM", tol=tol, ncv=ncv, v0=np.ones(n, dtype=B.dtype))
         order = np.argsort(w)

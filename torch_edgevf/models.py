@@ -10,7 +10,7 @@ logits per mesh (``head="global"``), per vertex (``"vertex"``) or per face (``"f
       --ModulusNorm, ComplexLinear--> (E, W)
       --EdgeDiffusionBlock x N-->  (learned L_c heat diffusion, complex mixing gated by
                                     invariants, ModReLU, residual)
-      --InvariantReadout--> |z|, Re(z conj(A z))  (E, 2W) real  [+ edge means of f]
+      --InvariantReadout, symlog--> |z|, Re(z conj(A z))  (E, 2W) real  [+ edge means of f]
       --MLP, pooling (global / vertex / face, M_z weighted)--> logits
 
 :class:`DiffusionNetBaseline` (Sharp et al. 2022, written here from the paper): vertex
@@ -65,6 +65,11 @@ def _mlp(sizes, dropout: float = 0.0) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+def _symlog(x: torch.Tensor) -> torch.Tensor:
+    """``sign(x) log(1 + |x|)``: tames the heavy tails of invariant features (slivers)."""
+    return torch.sign(x) * torch.log1p(x.abs())
+
+
 def _check_batch(batch, in_channels: int) -> None:
     f = getattr(batch, "features", None)
     if not isinstance(f, torch.Tensor) or f.dim() != 2 or f.shape[1] != in_channels:
@@ -78,9 +83,14 @@ def _check_batch(batch, in_channels: int) -> None:
 class EdgeDiffusionBlock(nn.Module):
     """One residual block on complex edge features ``(E, W)``.
 
-    ``zd = diffuse(z)`` (learned time per channel, ``L_c``), invariants
-    ``g = MLP(|z|, |zd|, Re(zd conj(A zd)))``, then
+    ``zd = diffuse(z)`` (learned time per channel, ``L_c``), a bounded invariant gate
+    ``g = tanh(MLP(symlog(|z|, |zd|, Re(zd conj(A zd)))))``, then
     ``z + ComplexLinear(ModReLU(ComplexLinear([z, zd]) * g))``.
+
+    The gate is bounded and its inputs log-compressed so that a block is at most linear
+    in ``z``: gradient features of real meshes have huge outliers on sliver triangles
+    (the normal component of a gradient across a nearly flat face), which a gate growing
+    with ``|z|`` amplifies block after block.
     """
 
     def __init__(self, width: int, diffusion: str = "spectral"):
@@ -98,8 +108,8 @@ class EdgeDiffusionBlock(nn.Module):
                                 offsets=batch.edge_offsets)
         else:
             zd = self.diffusion(z, batch.edge_mass, L=batch.connection_laplacian)
-        inv = torch.cat([self.readout(zd), z.abs()], dim=1)
-        h = self.mix(torch.cat([z, zd], dim=1)) * self.gate(inv).to(z.real.dtype)
+        inv = _symlog(torch.cat([self.readout(zd), z.abs()], dim=1))
+        h = self.mix(torch.cat([z, zd], dim=1)) * torch.tanh(self.gate(inv)).to(z.real.dtype)
         return z + self.out(self.act(h))
 
 
@@ -146,7 +156,7 @@ class EdgeFieldNet(nn.Module):
         z = self.lift(z)
         for block in self.blocks:
             z = block(z, batch)
-        s = self.readout(z)
+        s = _symlog(self.readout(z))
         if self.use_scalars:
             e = batch.edges
             s = torch.cat([s, self.scalars(0.5 * (f[e[:, 0]] + f[e[:, 1]])).to(s.dtype)], dim=1)
