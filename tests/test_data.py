@@ -1,7 +1,6 @@
 """Data: per-mesh operators, the on-disk cache, batching (with DataLoader workers), PSB."""
 
 import logging
-from pathlib import Path
 
 import numpy as np
 import pytest

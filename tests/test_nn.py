@@ -342,3 +342,16 @@ def test_edge_network_implicit_diffusion(moved_pair):
     net = models.EdgeFieldNet(8, 2, width=4, num_blocks=1, diffusion="implicit").double()
     out = net(data.MeshBatch.from_operators(s1.operators, s1.features))
     assert out.shape == (1, 2) and torch.isfinite(out).all()
+
+
+def test_network_errors(moved_pair):
+    s1, _, _, _ = moved_pair
+    batch = data.MeshBatch.from_operators(s1.operators, s1.features)
+    with pytest.raises(ValueError, match="batch.features"):
+        models.EdgeFieldNet(3, 2).double()(batch)
+    no_grad = data.MeshBatch.from_operators(data.compute_operators(s1.operators.verts, s1.operators.faces, k_edge=4,
+                                                                   k_vertex=4), s1.features)
+    with pytest.raises(ValueError, match="vertex_gradient"):
+        models.DiffusionNetBaseline(8, 2).double()(no_grad)
+    with pytest.raises(ValueError, match="width"):
+        models.DiffusionNetBaseline(8, 2, width=0)
