@@ -133,11 +133,6 @@ def check_pipeline(verts, faces, name: str, ns=(1,)) -> dict:
     return out
 
 
-def need_singularities():
-    if singularities is None:
-        pytest.skip("torch_edgevf.singularities is not available yet: index sums not checked")
-
-
 # --------------------------------------------------------------------------- shared meshes
 
 
