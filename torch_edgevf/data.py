@@ -699,10 +699,9 @@ def find_degenerate_faces(verts, faces) -> np.ndarray:
 def repair_degenerate_faces(verts, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
     """Repair zero-area faces of a closed manifold mesh by collapsing one of their short edges.
 
-    Procedure, for each zero-area face ``(a, b, c)`` in turn: its shortest edge, then the
-    other edges by increasing length, is tried as an edge collapse ``u -> w`` (``u`` the
-    end not on the longest edge when it is the middle corner of a cap). The collapse
-    moves no vertex: ``u`` is removed, every face using ``u`` uses ``w`` instead, and the
+    Procedure, for each zero-area face in turn: its edges, shortest first, are tried as
+    an edge collapse ``u -> w``, both directions for each edge. A collapse moves no
+    vertex: ``u`` is removed, every face using ``u`` uses ``w`` instead, and the
     two faces sharing the edge ``uw`` (the degenerate face and its neighbour) are
     deleted. A collapse is accepted only if the link condition holds (``u`` and ``w``
     share exactly two neighbours), no face becomes degenerate and the result is still a
