@@ -43,6 +43,7 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import argparse
+import contextlib
 import json
 import logging
 import sys
@@ -499,11 +500,41 @@ def main(argv=None) -> int:
     parser.add_argument("--no-diffusionnet", action="store_true")
     parser.add_argument("--diffusionnet-max-vertices", type=int, default=50_000)
     parser.add_argument("--json", type=Path, default=RESULTS / "peers.json")
+    parser.add_argument("--blas-threads", type=int, default=1,
+                        help="BLAS threads for everyone (torch_edgevf's eigensolver uses 1 anyway); "
+                             "0 leaves BLAS alone. Oversubscribed OpenBLAS made ARPACK 10x noisier here")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s", stream=sys.stderr)
     if args.quick:
         args.levels, args.meshes = [3, 4], ["spot_low_resolution.obj"]
     info = machine_info()
+    info["blas_threads"] = args.blas_threads or "default"
+    limits = contextlib.nullcontext()
+    if args.blas_threads:
+        try:
+            from threadpoolctl import threadpool_limits
+
+            limits = threadpool_limits(limits=args.blas_threads, user_api="blas")
+        except ImportError:
+            log.warning("threadpoolctl is not installed: BLAS threads left as they are")
+    with limits:
+        acc, spd = _run(args)
+    info["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
+    text = report(acc, spd)
+    header = (f"Machine: {info.get('cpu')}, {info.get('cores')} cores, torch {info.get('torch')} "
+              f"({info.get('torch_threads')} threads, OMP_WAIT_POLICY={info.get('omp_wait_policy')}, "
+              f"BLAS threads {info['blas_threads']}), libigl {info.get('igl')}, potpourri3d "
+              f"{info.get('potpourri3d')}, robust_laplacian {info.get('robust_laplacian')}; load "
+              f"{info.get('load_average')} before, {info['load_average_after']} after.\n")
+    print(header)
+    print(text)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps({"machine": info, "accuracy": acc, "speed": spd}, indent=1, default=float))
+    log.info("wrote %s", args.json)
+    return 0
+
+
+def _run(args) -> tuple[list, list]:
     acc, spd = [], []
     if not args.no_accuracy:
         for level in args.levels:
@@ -514,18 +545,7 @@ def main(argv=None) -> int:
             _, v, _ = mesh_arrays(name)
             dn = not args.no_diffusionnet and v.shape[0] <= args.diffusionnet_max_vertices
             spd.append(speed(name, dn))
-    info["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
-    text = report(acc, spd)
-    header = (f"Machine: {info.get('cpu')}, {info.get('cores')} cores, torch {info.get('torch')} "
-              f"({info.get('torch_threads')} threads, OMP_WAIT_POLICY={info.get('omp_wait_policy')}), libigl {info.get('igl')}, potpourri3d "
-              f"{info.get('potpourri3d')}, robust_laplacian {info.get('robust_laplacian')}; load "
-              f"{info.get('load_average')} before, {info['load_average_after']} after.\n")
-    print(header)
-    print(text)
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"machine": info, "accuracy": acc, "speed": spd}, indent=1, default=float))
-    log.info("wrote %s", args.json)
-    return 0
+    return acc, spd
 
 
 if __name__ == "__main__":
