@@ -409,16 +409,8 @@ def test_bad_mesh_raises_value_error_naming_location(case):
             fn()
 
 
-# face_geometry on raw faces checks only the largest index: a negative one reaches
-# index_select (IndexError), and diagnose(), which catches ValueError only, crashes.
-_NEGATIVE_INDEX_BUG = pytest.mark.xfail(
-    strict=True, raises=IndexError,
-    reason="geometry.face_geometry does not reject negative vertex indices (IndexError from index_select)",
-)
-
-
 @pytest.mark.parametrize(
-    "case", [pytest.param(c, marks=_NEGATIVE_INDEX_BUG) if c == "negative_index" else c for c in BAD]
+    "case", BAD
 )
 def test_geometry_and_diagnose_report_bad_mesh(case):
     """The geometry entry points and diagnose() never crash: ValueError / a listed problem."""
@@ -553,11 +545,6 @@ def test_needle_operators_are_large_but_finite():
     assert float(evals.min()) > -1e-8 * float(evals.max())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="linalg.eigen.default_shift is -1e-6 max_i(A_ii / M_ii): one needle face makes it ~2e5 times "
-           "the first eigenvalue, and shift-invert Lanczos stalls (1000 restarts; 30x slower than sigma=-1e-2)",
-)
 def test_smoothest_field_converges_on_needle_rich_psb_mesh(caplog):
     """PSB 325 (mech) has faces of relative area 1e-8: the eigensolver must still converge."""
     if smoothest_field is None:

@@ -75,3 +75,6 @@ from .singularities import Singularities, locate_singularities, singularities, s
 from .poisson import GradientProjector, project_on_gradients
 from .transport import Transporter, transport
 from .param import parametrize
+
+from . import data, losses, models, nn, render
+from .losses import alignment_loss, curl_loss, div_loss, smoothness_loss, spectral_loss

@@ -126,8 +126,11 @@ def face_geometry(verts, faces) -> FaceGeometry:
     faces = faces.faces if isinstance(faces, Topology) else as_faces(faces)
     verts = as_verts(verts)
     faces = faces.to(verts.device)
-    if int(faces.max()) >= verts.shape[0]:
-        raise ValueError(f"faces reference vertex {int(faces.max())} but verts has {verts.shape[0]} rows")
+    bad = torch.nonzero(((faces < 0) | (faces >= verts.shape[0])).any(dim=1)).flatten().tolist()
+    if bad:
+        raise ValueError(
+            f"faces has vertex indices outside [0, {verts.shape[0]}) in faces [{list_some(bad)}]"
+        )
     p0, p1, p2 = (verts.index_select(0, faces[:, k]) for k in range(3))
     # e_k runs from corner k+1 to corner k+2 (the edge opposite corner k)
     e0, e1, e2 = p2 - p1, p0 - p2, p1 - p0
