@@ -74,6 +74,13 @@ def as_verts(verts, dtype: torch.dtype | None = None) -> torch.Tensor:
     return verts
 
 
+def check_n(n, minimum: int = 1) -> int:
+    """Return the symmetry order ``n`` as an int, or raise ``ValueError``."""
+    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < minimum:
+        raise ValueError(f"n must be an integer >= {minimum}, got {n!r}")
+    return int(n)
+
+
 def check_vertex_count(verts: torch.Tensor, num_vertices: int) -> None:
     """Raise if the vertex array does not match the topology's vertex count."""
     if verts.shape[0] != num_vertices:

@@ -62,6 +62,7 @@ import math
 import numpy as np
 import torch
 
+from ._validation import check_n
 from . import operators as ops
 from ._sparse import Pattern, sparse_coo
 from ._validation import as_verts, check_vertex_count, list_some
@@ -85,12 +86,6 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _METHODS = ("exponential", "implicit")
-
-
-def _check_n(n, minimum: int = 1) -> int:
-    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < minimum:
-        raise ValueError(f"n must be an integer >= {minimum}, got {n!r}")
-    return int(n)
 
 
 def _check_real(x, name: str, minimum: float | None = None) -> float:
@@ -133,7 +128,7 @@ class FieldDesigner:
     """
 
     def __init__(self, verts, faces, n: int = 1):
-        self.n = _check_n(n)
+        self.n = check_n(n)
         verts = as_verts(verts)
         topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
         check_vertex_count(verts, topo.num_vertices)
@@ -452,7 +447,7 @@ class FieldDesigner:
         t = _check_real(t, "t", 0.0)
         if method not in _METHODS:
             raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-        steps = _check_n(steps)
+        steps = check_n(steps)
         z = self._field(z0, "z0")
         if t == 0:
             return z

@@ -38,6 +38,7 @@ import math
 import numpy as np
 import torch
 
+from ._validation import check_n
 from ._validation import list_some
 from .geometry import FaceGeometry, _topology_and_verts, face_geometry, face_normals, vertex_normals
 from .operators import _complex_dtype, _edge_field
@@ -75,12 +76,6 @@ log = logging.getLogger(__name__)
 # --------------------------------------------------------------------------- n-th powers
 
 
-def _check_n(n, minimum: int = 1) -> int:
-    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < minimum:
-        raise ValueError(f"n must be an integer >= {minimum}, got {n!r}")
-    return int(n)
-
-
 def _as_complex(z, name: str = "z") -> torch.Tensor:
     if not isinstance(z, torch.Tensor):
         z = torch.as_tensor(z)
@@ -113,7 +108,7 @@ def nth_power(u, n: int) -> torch.Tensor:
     -------
     complex tensor of the same shape; ``0`` where ``u = 0``.
     """
-    n = _check_n(n)
+    n = check_n(n)
     u = _as_complex(u, "u")
     r, unit = _unit(u)
     return r * unit ** n
@@ -134,7 +129,7 @@ def nth_root(z, n: int) -> torch.Tensor:
     -------
     complex tensor of the same shape, with ``arg`` in ``(-pi/n, pi/n]``.
     """
-    n = _check_n(n)
+    n = check_n(n)
     z = _as_complex(z)
     return torch.polar(z.abs(), torch.angle(z) / n)
 
@@ -146,7 +141,7 @@ def nth_roots(z, n: int) -> torch.Tensor:
     -------
     complex tensor of shape ``z.shape + (n,)``.
     """
-    n = _check_n(n)
+    n = check_n(n)
     z = _as_complex(z)
     real = z.real.dtype
     k = torch.arange(n, device=z.device, dtype=real)
@@ -211,7 +206,7 @@ def face_edge_coefficients(verts, topo, n: int = 1, geom: FaceGeometry | None = 
     -------
     (F, 3) complex tensor.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo) if geom is None else geom
     return _face_edge_coefficients(geom, topo, n)
@@ -296,7 +291,7 @@ def interpolate(verts, topo, z, face_index, bary, n: int = 1) -> torch.Tensor:
     -------
     (P,) complex tensor.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     face_index, bary = _check_points(face_index, bary, topo, verts)
@@ -324,7 +319,7 @@ def face_values(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (F,) complex tensor.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     u = _face_edge_coefficients(face_geometry(verts, topo), topo, n)
@@ -379,7 +374,7 @@ def edge_directions(verts, topo, z, n: int) -> torch.Tensor:
     (E, n, 3) tensor: ``nth_roots(z, n)`` drawn in the edge frames; direction ``k`` is
     direction 0 turned by ``2 pi k / n``.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     x, y, _ = edge_frames(verts, topo)
@@ -388,7 +383,7 @@ def edge_directions(verts, topo, z, n: int) -> torch.Tensor:
 
 def face_directions(verts, topo, z, n: int) -> torch.Tensor:
     """(F, n, 3) the ``n`` directions at face barycenters (root of :func:`face_values`)."""
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     x, y, _ = face_frames(verts, topo)
     return _directions(x, y, face_values(verts, topo, z, n), n)
@@ -396,7 +391,7 @@ def face_directions(verts, topo, z, n: int) -> torch.Tensor:
 
 def point_directions(verts, topo, z, face_index, bary, n: int) -> torch.Tensor:
     """(P, n, 3) the ``n`` directions at points inside faces (root of :func:`interpolate`)."""
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     w = interpolate(verts, topo, z, face_index, bary, n)
     x, y, _ = face_frames(verts, topo)
@@ -406,7 +401,7 @@ def point_directions(verts, topo, z, face_index, bary, n: int) -> torch.Tensor:
 
 def vertex_directions(verts, topo, z, n: int) -> torch.Tensor:
     """(V, n, 3) the ``n`` directions at vertices (root of :func:`edges_to_vertices`)."""
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     x, y, _ = vertex_frames(verts, topo)
     return _directions(x, y, edges_to_vertices(verts, topo, z, n), n)
@@ -515,7 +510,7 @@ def vertex_transport(verts, topo, n: int = 1) -> tuple[torch.Tensor, torch.Tenso
     vertex, edge : (P,) int64 tensors, one row per vertex-edge incidence
     r : (P,) complex tensor ``r_ve ** n``
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     return _vertex_transport(verts, topo, n)
 
@@ -594,7 +589,7 @@ def edges_to_vertices(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (V,) complex tensor.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     pv, pe, r = _vertex_transport(verts, topo, n)
@@ -616,7 +611,7 @@ def vertices_to_edges(verts, topo, zv, n: int = 1) -> torch.Tensor:
     -------
     (E,) complex tensor.
     """
-    n = _check_n(n)
+    n = check_n(n)
     verts, topo = _topology_and_verts(verts, topo)
     zv = _as_complex(zv, "zv")
     if zv.shape != (topo.num_vertices,):

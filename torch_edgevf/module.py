@@ -6,7 +6,7 @@ import torch
 from torch import nn
 
 from . import operators as ops
-from ._validation import as_verts, check_vertex_count
+from ._validation import as_verts, check_n, check_vertex_count
 from .geometry import face_geometry
 from .topology import Topology
 
@@ -58,8 +58,7 @@ class EdgeOperators(nn.Module):
         verts = as_verts(verts)
         topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
         check_vertex_count(verts, topo.num_vertices)
-        if not isinstance(n, int) or isinstance(n, bool) or n < 0:
-            raise ValueError(f"n must be an integer >= 0, got {n!r}")
+        n = check_n(n, minimum=0)
         self.topology = topo
         self.n = n
         self.register_buffer("faces", topo.faces.to(verts.device))

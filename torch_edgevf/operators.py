@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from ._sparse import Pattern, diagonal, sparse_coo
+from ._validation import check_n
 from .geometry import (
     OFF_DIAGONAL,
     PAIR_A,
@@ -212,10 +213,9 @@ def connection_laplacian(verts, topo, n: int = 1) -> torch.Tensor:
     -------
     (E, E) sparse tensor, complex for ``n >= 1``, real for ``n = 0``.
     """
-    if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 0:
-        raise ValueError(f"n must be an integer >= 0, got {n!r}")
+    n = check_n(n, minimum=0)
     verts, topo, geom, signs = _prepare(verts, topo)
-    return _pattern(topo, "EE").assemble(_connection_laplacian_values(geom, signs, int(n)))
+    return _pattern(topo, "EE").assemble(_connection_laplacian_values(geom, signs, n))
 
 
 def gradient(verts, topo) -> torch.Tensor:

@@ -72,6 +72,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ._validation import check_n
 from .geometry import _topology_and_verts, angle_defects, face_geometry, face_normals, pair_transport
 from .operators import _edge_field
 from .topology import Topology
@@ -89,12 +90,6 @@ __all__ = [
 ]
 
 _BOUNDARY = ("round", "exclude")
-
-
-def _check_n(n) -> int:
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ValueError(f"n must be an integer >= 1 (the field's symmetry), got {n!r}")
-    return n
 
 
 @dataclass
@@ -201,7 +196,7 @@ def face_rotations(verts, topo, z, n: int = 1) -> torch.Tensor:
     (F, 3) real tensor in ``[-pi, pi]``.
     """
     verts, topo = _topology_and_verts(verts, topo)
-    n = _check_n(n)
+    n = check_n(n)
     verts = verts.detach()
     z = _edge_field(z, topo, verts).detach()
     if z.dim() != 1:
@@ -245,7 +240,7 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
     if boundary not in _BOUNDARY:
         raise ValueError(f"boundary must be one of {_BOUNDARY}, got {boundary!r}")
     verts, topo = _topology_and_verts(verts, faces)
-    n = _check_n(n)
+    n = check_n(n)
     with torch.no_grad():
         omega = face_rotations(verts, topo, z, n).to(torch.float64)
         dev = omega.device
@@ -325,7 +320,7 @@ def locate_singularities(verts, faces, z, n: int = 1, which=None) -> Singularity
         :func:`singularities`.
     """
     verts, topo = _topology_and_verts(verts, faces)
-    n = _check_n(n)
+    n = check_n(n)
     z = _edge_field(z, topo, verts)
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
@@ -419,7 +414,7 @@ def split_faces(verts, faces, z, which, barycentric, n: int = 1) -> SplitResult:
     barycentric : (K, 3) positive barycentric coordinates of the new vertices
     """
     verts, topo = _topology_and_verts(verts, faces)
-    n = _check_n(n)
+    n = check_n(n)
     z = _edge_field(z, topo, verts)
     dev = verts.device
     which = torch.as_tensor(which, dtype=torch.int64, device=dev).flatten()
