@@ -38,6 +38,7 @@ from .operators import (
     vertex_mass,
 )
 from .topology import Topology, remove_unreferenced_vertices
+from .allocator import tune_allocator
 
 __version__ = "0.1.0"
 

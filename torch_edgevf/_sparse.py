@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["Pattern", "sparse_coo", "diagonal"]
+__all__ = ["Pattern", "EdgePairPattern", "sparse_coo", "diagonal"]
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
@@ -90,3 +90,94 @@ class Pattern:
 def _index_dtype(size: int):
     """int32 indices where they fit (half the memory of int64), else int64."""
     return np.int32 if size < 2**31 - 1 else np.int64
+
+
+_NEXT = np.array([1, 2, 0])
+_PREV = np.array([2, 0, 1])
+_SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
+
+
+class EdgePairPattern:
+    """The ``(E, E)`` pattern of operators coupling the edges of each face, filled by gathers.
+
+    Row ``e`` holds the diagonal and the two other edges of each face of ``e``; on a
+    manifold mesh every off-diagonal nonzero comes from exactly one face. Values are given
+    corner-major, as ``(3, F)`` tensors: ``diag[k, f]`` at the edge opposite corner ``k``
+    (summed over the faces of the edge), ``upper[j, f]`` at (edge opposite corner ``j``,
+    edge opposite corner ``j + 1``) and ``lower[j, f]`` at the transposed position.
+    Assembly is two gathers for the diagonal and one into sorted COO order: no scatter,
+    no sort.
+
+    Parameters
+    ----------
+    face_edges : (F, 3) int array
+    edge_faces, edge_corners : (E, 2) int arrays, -1 where there is no face
+    """
+
+    def __init__(self, face_edges, edge_faces, edge_corners):
+        fe = np.asarray(face_edges, dtype=np.int64)
+        ef = np.asarray(edge_faces, dtype=np.int64)
+        ec = np.asarray(edge_corners, dtype=np.int64)
+        ne, nf = ef.shape[0], fe.shape[0]
+        self.shape = (ne, ne)
+        index = _index_dtype(ne + 6 * nf)
+        closed = bool((ef >= 0).all())
+        flat_fe = fe.ravel()
+        # slot s of row e holds column cols[s][e], whose value comes from src[s][e]
+        cols, src = [np.arange(ne)], [np.arange(ne)]
+        for side in (0, 1):
+            g, k = ef[:, side], ec[:, side]
+            nxt, prv = _NEXT[k], _PREV[k]
+            # (k, k+1) is upper[k, g]; (k, k+2) is the transpose of upper[k+2, g]
+            cols += [flat_fe[3 * g + nxt], flat_fe[3 * g + prv]]
+            src += [ne + k * nf + g, ne + 3 * nf + prv * nf + g]
+            if not closed:
+                missing = g < 0
+                cols[-1][missing] = cols[-2][missing] = ne  # the sentinel ne sorts last
+        # sort each row by column: a 9-comparator sorting network on (column, slot) keys
+        keys = [c * 8 + slot for slot, c in enumerate(cols)]
+        for i, j in _SORT5:
+            keys[i], keys[j] = np.minimum(keys[i], keys[j]), np.maximum(keys[i], keys[j])
+        keys = np.stack(keys, axis=1).ravel()  # row-major (E, 5) = COO order
+        src = np.concatenate(src)[(keys & 7) * ne + np.repeat(np.arange(ne), 5)]
+        cols = keys >> 3
+        rows = np.repeat(np.arange(ne), 5)
+        if not closed:
+            valid = cols < ne
+            rows, cols, src = rows[valid], cols[valid], src[valid]
+        self.nnz = int(rows.shape[0])
+        self._indices = torch.from_numpy(np.stack([rows, cols]))
+        self._gather = torch.from_numpy(src.astype(index))
+        # diagonal: the (corner, face) of each side of every edge in the flat (3F,) layout, 3F if none
+        diag_src = np.where(ef >= 0, ec * nf + ef, 3 * nf).T
+        self._diag = tuple(torch.from_numpy(np.ascontiguousarray(d).astype(index)) for d in diag_src)
+        self._on_device: dict = {}
+
+    @property
+    def indices(self) -> torch.Tensor:
+        """(2, nnz) int64 row and column indices, sorted lexicographically."""
+        return self._indices
+
+    def _tensors(self, device):
+        device = torch.device(device)
+        host = (self._indices, self._gather) + self._diag
+        if device.type == "cpu":
+            return host
+        if device not in self._on_device:
+            self._on_device[device] = tuple(t.to(device) for t in host)
+        return self._on_device[device]
+
+    def assemble(self, diag: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor) -> torch.Tensor:
+        """Sparse COO from corner-major ``(3, F)`` diagonal, upper and lower face terms."""
+        indices, gather, side0, side1 = self._tensors(upper.device)
+        dtype = torch.promote_types(torch.promote_types(diag.dtype, upper.dtype), lower.dtype)
+        flat = torch.cat([diag.reshape(-1), diag.new_zeros(1)]).to(dtype)
+        on_diag = flat.index_select(0, side0) + flat.index_select(0, side1)
+        values = torch.cat([on_diag, upper.reshape(-1).to(dtype), lower.reshape(-1).to(dtype)])
+        return sparse_coo(indices, values.index_select(0, gather), self.shape)
+
+    def assemble_pairs(self, values: torch.Tensor) -> torch.Tensor:
+        """Sparse COO from ``(F, 9)`` per-face values of the ordered corner pairs (row-major ``3a + b``)."""
+        v = values.reshape(-1, 3, 3).permute(1, 2, 0)  # (a, b, F)
+        k = [0, 1, 2]
+        return self.assemble(v[k, k], v[k, [1, 2, 0]], v[[1, 2, 0], k])

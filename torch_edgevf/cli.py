@@ -10,6 +10,8 @@ import time
 import numpy as np
 import torch
 
+from .allocator import tune_allocator
+
 log = logging.getLogger("torch_edgevf")
 
 
@@ -266,6 +268,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     if args.command is None:
         args = parser.parse_args([*(["-q"] if args.quiet else []), "demo"])
+    tune_allocator()  # our own process: keep freed memory for reuse (see torch_edgevf.allocator)
     try:
         return args.func(args)
     except (ValueError, FileNotFoundError) as exc:

@@ -154,9 +154,7 @@ class FieldDesigner:
         return ops._complex_dtype(self.verts.dtype)
 
     def _laplacian(self, n: int) -> torch.Tensor:
-        return ops._pattern(self.topology, "EE").assemble(
-            ops._connection_laplacian_values(self._geom, self._signs, n)
-        )
+        return ops._connection_laplacian_from(self._geom, self._signs, self.topology, n)
 
     def _mass_matrix(self) -> torch.Tensor:
         return ops.diagonal(self.mass.to(self.complex_dtype))

@@ -103,15 +103,21 @@ class FaceGeometry:
 def _checked(geom: FaceGeometry) -> FaceGeometry:
     """Reject faces whose area is zero relative to their longest edge."""
     eps = torch.finfo(geom.double_area.dtype).eps
-    lmax = geom.lengths.detach().max(dim=1).values
-    bad = torch.nonzero(geom.double_area.detach() <= 8 * eps * lmax * lmax).flatten().tolist()
-    if bad:
+    lt = geom.lengths.detach().t()
+    lmax = torch.maximum(torch.maximum(lt[0], lt[1]), lt[2])
+    degenerate = geom.double_area.detach() <= 8 * eps * lmax * lmax
+    if degenerate.any():
+        bad = torch.nonzero(degenerate).flatten().tolist()
         raise ValueError(f"zero-area (degenerate) faces at faces [{list_some(bad)}]")
     return geom
 
 
 def face_geometry(verts, faces) -> FaceGeometry:
     """Per-face lengths, doubled areas and corner dot products from vertex positions.
+
+    Computed coordinate by coordinate on ``(F,)`` vectors (structure of arrays); the
+    ``(F, 3)`` attributes are transposed views of contiguous ``(3, F)`` tensors, so
+    ``geom.lengths.t()`` etc. are contiguous.
 
     Parameters
     ----------
@@ -126,19 +132,30 @@ def face_geometry(verts, faces) -> FaceGeometry:
     faces = faces.faces if isinstance(faces, Topology) else as_faces(faces)
     verts = as_verts(verts)
     faces = faces.to(verts.device)
-    bad = torch.nonzero(((faces < 0) | (faces >= verts.shape[0])).any(dim=1)).flatten().tolist()
-    if bad:
+    out_of_range = (faces < 0) | (faces >= verts.shape[0])
+    if out_of_range.any():
+        bad = torch.nonzero(out_of_range.any(dim=1)).flatten().tolist()
         raise ValueError(
             f"faces has vertex indices outside [0, {verts.shape[0]}) in faces [{list_some(bad)}]"
         )
-    p0, p1, p2 = (verts.index_select(0, faces[:, k]) for k in range(3))
-    # e_k runs from corner k+1 to corner k+2 (the edge opposite corner k)
-    e0, e1, e2 = p2 - p1, p0 - p2, p1 - p0
-    lengths = torch.stack([torch.linalg.vector_norm(e, dim=-1) for e in (e0, e1, e2)], dim=1)
-    double_area = torch.linalg.vector_norm(torch.linalg.cross(e0, e1), dim=-1)
+    # Everything below is an (F,) vector: many small 1-D operations beat (F, 3, 3) temporaries.
+    coords = verts.t().contiguous()
+    ft = faces.t().contiguous()
+    p = [[coords[x].index_select(0, ft[k]) for k in range(3)] for x in range(3)]  # p[x][corner]
+    # e[x][k]: coordinate x of the edge opposite corner k, running from corner k+1 to k+2
+    e = [[p[x][(k + 2) % 3] - p[x][(k + 1) % 3] for k in range(3)] for x in range(3)]
+
+    def dot(a: int, b: int) -> torch.Tensor:
+        return e[0][a] * e[0][b] + e[1][a] * e[1][b] + e[2][a] * e[2][b]
+
+    lengths = torch.sqrt(torch.stack([dot(0, 0), dot(1, 1), dot(2, 2)]))
+    cx = e[1][0] * e[2][1] - e[2][0] * e[1][1]
+    cy = e[2][0] * e[0][1] - e[0][0] * e[2][1]
+    cz = e[0][0] * e[1][1] - e[1][0] * e[0][1]
+    double_area = torch.sqrt(cx * cx + cy * cy + cz * cz)
     # vectors leaving corner k: towards k+1 is -e_{k+2}, towards k+2 is e_{k+1}
-    dots = -torch.stack([(e2 * e1).sum(-1), (e0 * e2).sum(-1), (e1 * e0).sum(-1)], dim=1)
-    return _checked(FaceGeometry(lengths, double_area, dots))
+    dots = -torch.stack([dot(2, 1), dot(0, 2), dot(1, 0)])
+    return _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
 
 
 def _topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:

@@ -81,9 +81,7 @@ class EdgeOperators(nn.Module):
         e = self.edges.to(verts.device)
         self.verts = verts
         self.mass = ops.diagonal(mass_values)
-        self.connection_laplacian = ops._pattern(topo, "EE").assemble(
-            ops._connection_laplacian_values(geom, signs, self.n, r1)
-        )
+        self.connection_laplacian = ops._connection_laplacian_from(geom, signs, topo, self.n)
         self.gradient = gradient
         self.curl_div = ops._pattern(topo, "FE").assemble(ops._curl_values(geom, signs))
         self.laplace_beltrami = ops._laplace_beltrami_from(gradient.values(), mass_values, topo)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ._sparse import Pattern, diagonal, sparse_coo
+from ._sparse import EdgePairPattern, Pattern, diagonal, sparse_coo
 from ._validation import check_n
 from .geometry import (
     OFF_DIAGONAL,
@@ -73,7 +73,7 @@ def _pattern(topo: Topology, name: str) -> Pattern:
         fe = topo.face_edges.numpy()
         ne, nv, nf = topo.num_edges, topo.num_vertices, topo.num_faces
         if name == "EE":
-            return Pattern(fe[:, _A], fe[:, _B], (ne, ne))
+            return EdgePairPattern(fe, topo.edge_faces.numpy(), topo.edge_corners.numpy())
         if name == "EV":
             return Pattern(fe[:, _A], f[:, _B], (ne, nv))
         if name == "VV":
@@ -153,17 +153,31 @@ def _mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
     return geom.area.new_zeros(topo.num_edges).index_add(0, fe.flatten(), third.flatten())
 
 
-def _connection_laplacian_values(geom: FaceGeometry, signs: torch.Tensor, n: int, r1=None) -> torch.Tensor:
-    """Per-face ``L_c^(n)`` contributions; ``r1`` is ``pair_transport(geom, signs, 1)`` if known."""
-    a2 = geom.double_area[:, None]
-    off = torch.as_tensor(OFF_DIAGONAL, device=a2.device)
-    real = torch.where(
-        off, -2 * pair_columns(geom.dots, "c") / a2, 2 * pair_columns(geom.lengths, "a") ** 2 / a2
-    )
+def _connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: Topology, n: int) -> torch.Tensor:
+    """Assemble ``L_c^(n)`` from the 3 diagonal and 3 unique off-diagonal terms of each face.
+
+    For the pair ``(a, b) = (j, j + 1)`` with third corner ``c = j + 2`` the entry is
+    ``-(2 d_c / 2A) conj(r_ab)^n`` with ``r_ab = -delta_a delta_b (d_c + i 2A) / (l_a l_b)``;
+    the transposed entry is its conjugate (Hermitian). Computed corner-major, on ``(F,)`` rows.
+    """
+    a2 = geom.double_area
+    lt, dt = geom.lengths.t(), geom.dots.t()  # (3, F)
+    inv_a2 = 1 / a2
+    diag = torch.stack([2 * lt[k] * lt[k] * inv_a2 for k in range(3)])
+    dc = [dt[(j + 2) % 3] for j in range(3)]
+    weight = [-2 * dc[j] * inv_a2 for j in range(3)]
+    pattern = _pattern(topo, "EE")
     if n == 0:
-        return real.flatten()
-    r = pair_transport(geom, signs, n) if r1 is None else _int_power(r1, n)
-    return (real * r.conj()).flatten()
+        w = torch.stack(weight)
+        return pattern.assemble(diag, w, w)
+    upper = []
+    st = signs.t()
+    for j in range(3):
+        inv_lab = 1 / (lt[j] * lt[(j + 1) % 3])
+        w = weight[j] if n % 2 == 0 else weight[j] * (-st[j] * st[(j + 1) % 3])
+        upper.append(w * _int_power(torch.complex(dc[j] * inv_lab, -a2 * inv_lab), n))
+    upper = torch.stack(upper)
+    return pattern.assemble(diag, upper, upper.conj())
 
 
 def _gradient_values(geom: FaceGeometry, signs: torch.Tensor, r1=None) -> torch.Tensor:
@@ -215,7 +229,7 @@ def connection_laplacian(verts, topo, n: int = 1) -> torch.Tensor:
     """
     n = check_n(n, minimum=0)
     verts, topo, geom, signs = _prepare(verts, topo)
-    return _pattern(topo, "EE").assemble(_connection_laplacian_values(geom, signs, n))
+    return _connection_laplacian_from(geom, signs, topo, n)
 
 
 def gradient(verts, topo) -> torch.Tensor:
@@ -316,7 +330,7 @@ def _curl_energy_block(verts, topo) -> tuple[torch.Tensor, int]:
     verts, topo, geom, signs = _prepare(verts, topo)
     k = signs * geom.lengths
     vals = 2 * pair_columns(k, "a") * pair_columns(k, "b") / geom.double_area[:, None]
-    return _pattern(topo, "EE").assemble(vals.flatten()), topo.num_edges
+    return _pattern(topo, "EE").assemble_pairs(vals), topo.num_edges
 
 
 def _embed(block: torch.Tensor, offset: int, size: int) -> torch.Tensor:
@@ -413,7 +427,7 @@ def covariant_derivative(verts, topo, w) -> torch.Tensor:
 
 def _covariant_from(geom, signs, topo, w) -> torch.Tensor:
     w_pairs = w[pair_columns(topo.face_edges.to(w.device), "a")]
-    return _pattern(topo, "EE").assemble(_covariant_values(geom, signs, w_pairs))
+    return _pattern(topo, "EE").assemble_pairs(_covariant_values(geom, signs, w_pairs))
 
 
 def cotan_laplacian(verts, topo) -> torch.Tensor:

@@ -72,29 +72,41 @@ class Topology:
         f = faces.detach().cpu().numpy()
         nf = f.shape[0]
         nv = _check_indices(f, num_vertices)
-        _check_duplicate_faces(f)
 
-        src, dst = f[:, _NEXT], f[:, _PREV]
-        lo, hi = np.minimum(src, dst), np.maximum(src, dst)
-        keys, face_edges = np.unique((lo * nv + hi).ravel(), return_inverse=True)
+        src, dst = f[:, _NEXT], f[:, _PREV]  # the half-edge opposite each corner
+        positive = src < dst
+        lo, hi = np.where(positive, src, dst).ravel(), np.where(positive, dst, src).ravel()
+        keys, face_edges = _unique_edges(lo, hi, nv)
         face_edges = face_edges.reshape(nf, 3)
-        signs = np.where(src < dst, 1, -1)
+        signs = np.where(positive, 1, -1)
         ne = keys.shape[0]
-        edges = np.stack([keys // nv, keys % nv], axis=1)
+        edges = np.empty((ne, 2), dtype=np.int64)
+        np.floor_divide(keys, nv, out=edges[:, 0])
+        np.subtract(keys, edges[:, 0] * nv, out=edges[:, 1])
 
         counts = np.bincount(face_edges.ravel(), minlength=ne)
-        _check_manifold_edges(edges, face_edges, counts)
-        slot = (signs < 0).astype(np.int64).ravel()
+        if counts.max() > 2:
+            _check_duplicate_faces(f)  # the clearer message when that is the cause
+            _check_manifold_edges(edges, face_edges, counts)
+        slot = (~positive).ravel().astype(np.int64)
         sided = np.bincount(face_edges.ravel() * 2 + slot, minlength=2 * ne)
-        _check_orientation(edges, face_edges, sided)
+        if sided.max() > 1:
+            _check_duplicate_faces(f)
+            _check_orientation(edges, face_edges, sided)
 
+        # each side of every edge: (face, corner opposite the edge), -1 if there is none
+        side = 2 * face_edges.ravel() + slot
         edge_faces = np.full((ne, 2), -1, dtype=np.int64)
         edge_corners = np.full((ne, 2), -1, dtype=np.int64)
-        face_ids = np.repeat(np.arange(nf), 3)
-        corner_ids = np.tile(np.arange(3), nf)
-        edge_faces[face_edges.ravel(), slot] = face_ids
-        edge_corners[face_edges.ravel(), slot] = corner_ids
-        _check_manifold_vertices(f, nv, edge_faces, edge_corners)
+        edge_faces.ravel()[side] = np.repeat(np.arange(nf), 3)
+        edge_corners.ravel()[side] = np.tile(np.arange(3), nf)
+        # two faces with the same vertices on both sides of an edge: a duplicated face pair
+        both = counts == 2
+        if both.any():
+            opposite = f.ravel()[3 * edge_faces[both] + edge_corners[both]]
+            if (opposite[:, 0] == opposite[:, 1]).any():
+                _check_duplicate_faces(f)
+        _check_manifold_vertices(f, nv, face_edges, slot.reshape(nf, 3), edge_faces, edge_corners)
 
         boundary_edges = counts == 1
         boundary_vertices = np.zeros(nv, dtype=bool)
@@ -102,27 +114,44 @@ class Topology:
         referenced = np.zeros(nv, dtype=bool)
         referenced[f.ravel()] = True
 
-        graph = sp.coo_matrix((np.ones(ne), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
-        _, labels = connected_components(graph, directed=False)
-        labels = np.where(referenced, labels, -1)
-        _, labels[referenced] = np.unique(labels[referenced], return_inverse=True)
-
         self.num_vertices = int(nv)
         self.num_edges = int(ne)
         self.num_faces = int(nf)
         self.faces = torch.from_numpy(f.astype(np.int64, copy=True))
         self.edges = torch.from_numpy(edges)
-        self.face_edges = torch.from_numpy(face_edges.astype(np.int64))
-        self.face_edge_signs = torch.from_numpy(signs.astype(np.int64))
+        self.face_edges = torch.from_numpy(face_edges.astype(np.int64, copy=False))
+        self.face_edge_signs = torch.from_numpy(signs.astype(np.int64, copy=False))
         self.edge_faces = torch.from_numpy(edge_faces)
         self.edge_corners = torch.from_numpy(edge_corners)
         self.boundary_edges = torch.from_numpy(boundary_edges)
         self.boundary_vertices = torch.from_numpy(boundary_vertices)
         self.unreferenced_vertices = torch.from_numpy(np.flatnonzero(~referenced))
-        self.components = torch.from_numpy(labels.astype(np.int64))
-        self.num_components = int(labels.max()) + 1
         self.euler_characteristic = int(referenced.sum()) - int(ne) + int(nf)
+        self._referenced = referenced
         self._cache: dict = {}
+
+    @property
+    def components(self) -> torch.Tensor:
+        """(V,) int64 connected-component label per vertex, ``-1`` if unreferenced (computed on first use)."""
+        return self._components()[0]
+
+    @property
+    def num_components(self) -> int:
+        """Number of connected components (computed on first use)."""
+        return self._components()[1]
+
+    def _components(self) -> tuple[torch.Tensor, int]:
+        def build():
+            nv, ne = self.num_vertices, self.num_edges
+            edges = self.edges.numpy()
+            graph = sp.coo_matrix((np.ones(ne), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
+            _, labels = connected_components(graph, directed=False)
+            referenced = self._referenced
+            labels = np.where(referenced, labels, -1)
+            _, labels[referenced] = np.unique(labels[referenced], return_inverse=True)
+            return torch.from_numpy(labels.astype(np.int64)), int(labels.max()) + 1
+
+        return self.cached("components", build)
 
     @property
     def is_closed(self) -> bool:
@@ -184,7 +213,35 @@ def remove_unreferenced_vertices(verts: torch.Tensor, faces) -> tuple[torch.Tens
     return verts[kept.to(verts.device)], new_index[faces], kept
 
 
+def _unique_edges(lo: np.ndarray, hi: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique keys ``lo * nv + hi`` and the index of each half-edge's key.
+
+    When they fit, the key and the half-edge's position are packed into one int64 so that
+    a plain sort (about 3x faster than an argsort) gives both the order and the keys.
+    """
+    keys = lo * nv + hi
+    n = keys.shape[0]
+    shift = max(int(n - 1).bit_length(), 1)
+    if nv * nv < 2 ** (62 - shift):
+        packed = np.sort((keys << shift) | np.arange(n))
+        order = packed & ((1 << shift) - 1)
+        sorted_keys = packed >> shift
+    else:
+        order = np.argsort(keys)
+        sorted_keys = keys[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=new[1:])
+    inverse = np.empty(n, dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return sorted_keys[new], inverse
+
+
 def _check_indices(f: np.ndarray, num_vertices: int | None) -> int:
+    nv = int(f.max()) + 1 if num_vertices is None else int(num_vertices)
+    repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
+    if f.min() >= 0 and f.max() < nv and not repeated.any():
+        return nv
     bad = np.flatnonzero((f < 0).any(axis=1))
     if bad.size:
         raise ValueError(f"faces has negative vertex indices in faces [{list_some(bad)}]")
@@ -247,21 +304,33 @@ def _check_orientation(edges, face_edges, sided) -> None:
         )
 
 
-def _check_manifold_vertices(f, nv, edge_faces, edge_corners) -> None:
-    """Every vertex's faces must form a single fan (connected through shared edges)."""
-    interior = (edge_faces >= 0).all(axis=1)
-    fl, fr = edge_faces[interior, 0], edge_faces[interior, 1]
-    kl, kr = edge_corners[interior, 0], edge_corners[interior, 1]
-    # In the left face the edge runs lo -> hi from corner kl+1 to kl+2; in the right face
-    # it runs hi -> lo from corner kr+1 to kr+2.
-    a = np.concatenate([3 * fl + _NEXT[kl], 3 * fl + _PREV[kl]])
-    b = np.concatenate([3 * fr + _PREV[kr], 3 * fr + _NEXT[kr]])
-    nc = 3 * f.shape[0]
-    graph = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(nc, nc))
-    _, labels = connected_components(graph, directed=False)
-    corner_vertex = f.ravel()
-    fans = np.unique(corner_vertex.astype(np.int64) * nc + labels)
-    per_vertex = np.bincount(fans // nc, minlength=nv)
+def _check_manifold_vertices(f, nv, face_edges, slot, edge_faces, edge_corners) -> None:
+    """Every vertex's faces must form a single fan (connected through shared edges).
+
+    The corners around a vertex are linked by ``next``: from corner ``k`` of a face, across
+    the edge leaving the vertex (opposite corner ``k + 2``), to the corner at the same vertex
+    in the neighbouring face. A fan is a chain (open, ends at the boundary) or a cycle
+    (closed). Chains are counted by their first corners; cycles by their smallest corner,
+    found by pointer doubling in ``O(3F log(valence))``.
+    """
+    nf = f.shape[0]
+    nc = 3 * nf
+    side = 2 * face_edges[:, _PREV].ravel() + 1 - slot[:, _PREV].ravel()  # the far side of that edge
+    g = edge_faces.ravel()[side]
+    nxt = np.where(g >= 0, 3 * g + _PREV[edge_corners.ravel()[side]], -1)
+    corner = np.arange(nc)
+    has_pred = np.zeros(nc, dtype=bool)
+    has_pred[nxt[nxt >= 0]] = True
+    terminal = nxt < 0
+    ptr = np.where(terminal, corner, nxt)
+    label = corner.copy()
+    steps = int(np.ceil(np.log2(max(int(np.bincount(f.ravel()).max()), 2)))) + 1
+    for _ in range(steps):
+        np.minimum(label, label[ptr], out=label)
+        ptr = ptr[ptr]
+    in_cycle = ~terminal[ptr]
+    representative = (~has_pred) | (in_cycle & (label == corner))
+    per_vertex = np.bincount(f.ravel()[representative], minlength=nv)
     bad = np.flatnonzero(per_vertex > 1)
     if bad.size:
         raise ValueError(
