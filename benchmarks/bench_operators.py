@@ -46,6 +46,7 @@ from common import (
 
 log = logging.getLogger("bench_operators")
 
+ALLOCATOR_ENV = "EDGEVF_BENCH_ALLOCATOR"
 TARGET_FIRST_VS_IGL = 1.0
 TARGET_UPDATE_VS_MATVEC = 3.0
 TARGET_PEAK_BYTES = 4 * 10**9
@@ -93,11 +94,20 @@ def repeats_for(num_faces: int) -> tuple[int, int]:
 # --------------------------------------------------------------------------- workers
 
 
+def _maybe_tune_allocator() -> None:
+    """Apply ``torch_edgevf.tune_allocator()`` when the parent asked for ``--allocator tuned``."""
+    import os
+
+    if os.environ.get(ALLOCATOR_ENV) == "tuned" and not _import_edgevf().tune_allocator():
+        raise RuntimeError("--allocator tuned needs glibc (mallopt)")
+
+
 def worker_edgevf(name: str) -> dict:
     """Time torch_edgevf on one mesh; peak RSS of this process is the memory figure."""
     import torch
 
     ev = _import_edgevf()
+    _maybe_tune_allocator()
     base_rss = current_rss_bytes()
     v_np, f_np = mesh_arrays(name)
     v = torch.from_numpy(v_np)
@@ -168,6 +178,7 @@ def worker_peers(name: str, check: bool) -> dict:
     """Time libigl on one mesh (and check our scalar L_c^(0) against its CR Laplacian)."""
     import igl
 
+    _maybe_tune_allocator()
     v, f = mesh_arrays(name)
     reps, _ = repeats_for(f.shape[0])
     out = {"mesh": name, "igl": getattr(igl, "__version__", "?")}
@@ -302,8 +313,10 @@ def report(cases: list[str], results: dict, info: dict) -> str:
         f"torch {info['torch']} ({info.get('torch_threads')} intra-op threads, default), numpy {info['numpy']}, "
         f"scipy {info['scipy']}, libigl {info.get('igl')}; Python {info['python']}. "
         "Meshes are float64; `L_c` is n = 1 (complex128). "
-        f"OMP_WAIT_POLICY={info.get('omp_wait_policy')} in the workers: on a shared, loaded machine "
-        "spinning OpenMP threads stall every small parallel op (measured 5x slower re-assembly).",
+        f"OMP_WAIT_POLICY={info.get('omp_wait_policy')} in the workers (on a shared, loaded machine "
+        "spinning OpenMP threads stall every small parallel op: use PASSIVE there); "
+        f"allocator: {info.get('allocator')} (`tuned` = `torch_edgevf.tune_allocator()` in both workers, "
+        "which lets glibc reuse freed memory instead of faulting fresh pages in).",
         "",
         markdown_table(headers, rows),
         "",
@@ -321,8 +334,11 @@ def main(argv=None) -> int:
     parser.add_argument("--check", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--no-peers", action="store_true", help="skip libigl")
     parser.add_argument("--output", type=Path, help="also write the markdown report here")
-    parser.add_argument("--omp-wait-policy", default="PASSIVE",
-                        help="OMP_WAIT_POLICY of the workers (default PASSIVE; 'default' leaves it unset)")
+    parser.add_argument("--omp-wait-policy", default="default",
+                        help="OMP_WAIT_POLICY of the workers ('default' leaves it unset; PASSIVE on a shared, "
+                             "loaded machine)")
+    parser.add_argument("--allocator", choices=["default", "tuned"], default="default",
+                        help="'tuned' calls torch_edgevf.tune_allocator() in both workers (ours and libigl's)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
 
@@ -339,6 +355,7 @@ def main(argv=None) -> int:
     info = machine_info()  # load average before the runs
     env = {} if args.omp_wait_policy.lower() == "default" else {"OMP_WAIT_POLICY": args.omp_wait_policy}
     info["omp_wait_policy"] = env.get("OMP_WAIT_POLICY", "unset")
+    env[ALLOCATOR_ENV] = info["allocator"] = args.allocator
     results = {}
     script = Path(__file__).resolve()
     for name in cases:

@@ -111,3 +111,62 @@ def test_require_closed_names_boundary():
     _, g = ev.meshes.grid(2, 2)
     with pytest.raises(ValueError, match="requires a closed mesh.*8 boundary edges"):
         Topology(g).require_closed("the test")
+
+
+def _fans_reference(f: np.ndarray) -> np.ndarray:
+    """Number of fans per vertex: connected components of its faces through shared edges."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    nv = int(f.max()) + 1
+    corner_vertex = f.ravel()
+    # corners at the same vertex in faces sharing an edge through that vertex are linked
+    pairs = {}
+    for face, (a, b, c) in enumerate(f):
+        for k, (u, w) in enumerate(((a, b), (b, c), (c, a))):
+            pairs.setdefault((min(u, w), max(u, w)), []).append((face, u, w))
+    rows, cols = [], []
+    for (u, w), members in pairs.items():
+        for i in range(len(members)):
+            for j in range(i + 1, len(members)):
+                for x in (u, w):
+                    fi, fj = members[i][0], members[j][0]
+                    rows.append(3 * fi + list(f[fi]).index(x))
+                    cols.append(3 * fj + list(f[fj]).index(x))
+    nc = 3 * len(f)
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(nc, nc))
+    _, labels = connected_components(graph, directed=False)
+    fans = np.zeros(nv, dtype=int)
+    for v in range(nv):
+        fans[v] = np.unique(labels[corner_vertex == v]).size
+    return fans
+
+
+@pytest.mark.parametrize("case", ["closed_and_open", "two_closed", "two_open", "valid_cone", "valid_grid"])
+def test_fan_check_agrees_with_connected_components(case):
+    """The walking fan count matches a connected-components reference on glued meshes."""
+    sphere = ev.icosphere(1)[1].numpy()
+    nsph = int(sphere.max()) + 1
+    grid = ev.meshes.grid(4, 4)[1].numpy()
+    cone = np.array([[0, 1 + k, 2 + k] for k in range(39)])  # an open fan of 39 faces around vertex 0
+    if case == "closed_and_open":
+        f = np.concatenate([sphere, grid + nsph])
+        f[f == nsph] = 0  # a grid corner (open fan) glued to a sphere vertex (closed fan)
+    elif case == "two_closed":
+        f = np.concatenate([sphere, sphere + nsph])
+        f[f == nsph + 3] = 3
+    elif case == "two_open":
+        f = np.concatenate([cone, cone + 41])
+        f[f == 41] = 0
+    elif case == "valid_cone":
+        f = cone
+    else:
+        f = grid
+    fans = _fans_reference(f)
+    bad = np.flatnonzero(fans > 1)
+    assert bool(bad.size) == (not case.startswith("valid"))
+    if bad.size:
+        with pytest.raises(ValueError, match=r"non-manifold vertices.*\[" + ", ".join(map(str, bad))):
+            Topology(torch.from_numpy(f))
+    else:
+        Topology(torch.from_numpy(f))

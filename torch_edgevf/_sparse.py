@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["Pattern", "EdgePairPattern", "sparse_coo", "diagonal"]
+__all__ = ["Pattern", "EdgePairPattern", "sparse_coo", "diagonal", "unique_pairs"]
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
@@ -42,22 +42,20 @@ class Pattern:
         rows = np.asarray(rows, dtype=np.int64).ravel()
         cols = np.asarray(cols, dtype=np.int64).ravel()
         self.shape = (int(shape[0]), int(shape[1]))
-        keys = rows * self.shape[1] + cols
-        order = np.argsort(keys, kind="stable")
-        sorted_keys = keys[order]
-        new = np.empty(keys.shape[0], dtype=bool)
-        new[:1] = True
-        new[1:] = sorted_keys[1:] != sorted_keys[:-1]
-        unique = sorted_keys[new]
-        target = np.cumsum(new) - 1
+        unique, target = unique_pairs(rows, cols, self.shape[1], self.shape[0])
         self.nnz = int(unique.shape[0])
-        self.num_contributions = int(keys.shape[0])
+        self.num_contributions = int(rows.shape[0])
         index = _index_dtype(self.num_contributions)
-        self._indices = torch.from_numpy(np.stack([unique // self.shape[1], unique % self.shape[1]]))
+        row = unique // self.shape[1]
+        self._indices = torch.from_numpy(np.stack([row, unique - row * self.shape[1]]))
         # assembly = gather the first contribution of every nonzero, then add the others
-        self._first = torch.from_numpy(order[new].astype(index))
-        self._rest_src = torch.from_numpy(order[~new].astype(index))
-        self._rest_dst = torch.from_numpy(target[~new].astype(index))
+        first = np.empty(self.nnz, dtype=np.int64)
+        first[target] = np.arange(self.num_contributions)  # one contribution per nonzero, whichever
+        rest = np.ones(self.num_contributions, dtype=bool)
+        rest[first] = False
+        self._first = torch.from_numpy(first.astype(index))
+        self._rest_src = torch.from_numpy(np.flatnonzero(rest).astype(index))
+        self._rest_dst = torch.from_numpy(target[rest].astype(index))
         self._on_device: dict = {}
 
     def _tensors(self, device) -> tuple[torch.Tensor, ...]:
@@ -85,6 +83,35 @@ class Pattern:
         if rest_src.numel():
             out = out.index_add(0, rest_dst, values.index_select(0, rest_src))
         return sparse_coo(indices, out, self.shape)
+
+
+def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique keys ``lo * nv + hi`` of integer pairs and the index of each pair's key.
+
+    ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``).
+
+    When they fit, the key and the pair's position are packed into one int64 so that
+    a plain sort (about 3x faster than an argsort) gives both the order and the keys.
+    """
+    keys = np.asarray(lo, dtype=np.int64) * nv + np.asarray(hi, dtype=np.int64)
+    n = keys.shape[0]
+    if n == 0:
+        return keys, np.zeros(0, dtype=np.int64)
+    shift = max(int(n - 1).bit_length(), 1)
+    if (nv if num_lo is None else num_lo) * nv <= 2 ** (63 - shift):
+        packed = np.sort((keys << shift) | np.arange(n))
+        order = packed & ((1 << shift) - 1)
+        sorted_keys = packed >> shift
+    else:
+        order = np.argsort(keys)
+        sorted_keys = keys[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=new[1:])
+    starts = np.flatnonzero(new)
+    inverse = np.empty(n, dtype=np.int64)
+    inverse[order] = np.repeat(np.arange(starts.shape[0]), np.diff(starts, append=n))
+    return sorted_keys[starts], inverse
 
 
 def _index_dtype(size: int):

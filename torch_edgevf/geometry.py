@@ -129,8 +129,16 @@ def face_geometry(verts, faces) -> FaceGeometry:
     ValueError
         On NaN/Inf coordinates or zero-area faces, naming them.
     """
-    faces = faces.faces if isinstance(faces, Topology) else as_faces(faces)
+    topo = faces if isinstance(faces, Topology) else None
+    faces = faces.faces if topo is not None else as_faces(faces)
     verts = as_verts(verts)
+    # Without autograd, the last geometry of a topology is reused for equal positions
+    # (compared by value, so in-place edits of any kind are seen).
+    cacheable = topo is not None and not (torch.is_grad_enabled() and verts.requires_grad)
+    if cacheable:
+        cached = topo._cache.get("geometry")
+        if cached is not None and _same_values(cached[0], verts):
+            return cached[1]
     faces = faces.to(verts.device)
     out_of_range = (faces < 0) | (faces >= verts.shape[0])
     if out_of_range.any():
@@ -155,7 +163,14 @@ def face_geometry(verts, faces) -> FaceGeometry:
     double_area = torch.sqrt(cx * cx + cy * cy + cz * cz)
     # vectors leaving corner k: towards k+1 is -e_{k+2}, towards k+2 is e_{k+1}
     dots = -torch.stack([dot(2, 1), dot(0, 2), dot(1, 0)])
-    return _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
+    geom = _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
+    if cacheable:
+        topo._cache["geometry"] = (verts.detach().clone(), geom)
+    return geom
+
+
+def _same_values(a: torch.Tensor, b: torch.Tensor) -> bool:
+    return a.dtype == b.dtype and a.device == b.device and a.shape == b.shape and torch.equal(a, b.detach())
 
 
 def _topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:

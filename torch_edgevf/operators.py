@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ._sparse import EdgePairPattern, Pattern, diagonal, sparse_coo
+from ._sparse import EdgePairPattern, Pattern, _index_dtype, diagonal, sparse_coo, unique_pairs
 from ._validation import check_n
 from .geometry import (
     OFF_DIAGONAL,
@@ -86,27 +86,73 @@ def _pattern(topo: Topology, name: str) -> Pattern:
 
 
 def _laplace_beltrami_plan(topo: Topology):
-    """For ``L = Re(G^H M_z^{-1} G)``: the pairs of nonzeros of G within each row, and their pattern.
+    """For ``L = Re(G^H M_z^{-1} G)``: which products of nonzeros of G go where.
 
-    Returns ``(pattern, p, q, rows)``: contribution ``i`` is ``Re(conj(g[p_i]) g[q_i])`` of the
-    values ``g`` of G scaled by ``1 / sqrt(m_row)``; ``rows`` is the row of each nonzero of G.
+    With ``h`` the values of G scaled by ``1 / sqrt(m_row)``, ``L_uu = sum |h_eu|^2`` over the
+    nonzeros of column ``u`` and, for ``u < v``, ``L_uv = L_vu = sum Re(conj(h_eu) h_ev)`` over the
+    rows ``e`` holding both. Only these upper pairs (at most 6 per row of G) are formed; the
+    full matrix is one gather of ``[diagonal, upper, upper]`` into sorted COO order.
+
+    Returns a dict of tensors: ``indices`` (2, nnz) of L, ``rows`` and ``cols`` of G's
+    nonzeros, ``p``, ``q`` (positions in G's values of each pair), ``target`` (the unique upper
+    entry of each pair), ``num_upper`` and ``gather``.
     """
 
     def build():
         ev = _pattern(topo, "EV")
         rows, cols = ev.indices.numpy()
-        counts = np.bincount(rows, minlength=topo.num_edges)
-        start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        nv, ne = topo.num_vertices, topo.num_edges
+        counts = np.bincount(rows, minlength=ne)
+        start = np.cumsum(counts) - counts
         width = int(counts.max())
-        k = np.arange(width)
-        pos = start[:, None] + k[None, :]
-        valid = k[None, :] < counts[:, None]
-        mask = valid[:, :, None] & valid[:, None, :]
-        index = np.int32 if ev.nnz < 2**31 - 1 else np.int64
-        p = np.broadcast_to(pos[:, :, None], mask.shape)[mask].astype(index)
-        q = np.broadcast_to(pos[:, None, :], mask.shape)[mask].astype(index)
-        pattern = Pattern(cols[p], cols[q], (topo.num_vertices, topo.num_vertices))
-        return pattern, torch.from_numpy(p), torch.from_numpy(q), torch.from_numpy(rows.copy())
+        iu, ju = np.triu_indices(width, 1)
+        valid = ju[None, :] < counts[:, None]  # iu < ju, so the first is valid too
+        p = (start[:, None] + iu[None, :])[valid]
+        q = (start[:, None] + ju[None, :])[valid]
+        del valid
+        # G's rows are sorted by column, so cols[p] < cols[q]
+        keys, target = unique_pairs(cols[p], cols[q], nv)
+        nu = keys.shape[0]
+        up_row = keys // nv
+        up_col = keys - up_row * nv
+        del keys
+        has_diag = np.bincount(cols, minlength=nv) > 0
+        n_upper = np.bincount(up_row, minlength=nv)
+        n_lower = np.bincount(up_col, minlength=nv)
+        row_len = n_lower + has_diag + n_upper
+        row_start = np.cumsum(row_len) - row_len
+        nnz = int(row_len.sum())
+        index = _index_dtype(nv + 2 * nu)
+        gather = np.empty(nnz, dtype=index)
+        out_cols = np.empty(nnz, dtype=np.int64)
+        # diagonal
+        diag_pos = (row_start + n_lower)[has_diag]
+        gather[diag_pos] = np.flatnonzero(has_diag)
+        out_cols[diag_pos] = np.flatnonzero(has_diag)
+        # upper entries, already sorted by (row, col): rank within the row
+        first_upper = np.cumsum(n_upper) - n_upper
+        upper_pos = row_start[up_row] + n_lower[up_row] + has_diag[up_row] + (np.arange(nu) - first_upper[up_row])
+        gather[upper_pos] = nv + np.arange(nu)
+        out_cols[upper_pos] = up_col
+        del upper_pos, first_upper
+        # lower entries (v, u): sorted by (v, u) through the transposed keys
+        order = np.argsort(up_col * nv + up_row)
+        lo_row = up_col[order]
+        first_lower = np.cumsum(n_lower) - n_lower
+        lower_pos = row_start[lo_row] + (np.arange(nu) - first_lower[lo_row])
+        gather[lower_pos] = nv + nu + order
+        out_cols[lower_pos] = up_row[order]
+        out_rows = np.repeat(np.arange(nv), row_len)
+        return {
+            "indices": torch.from_numpy(np.stack([out_rows, out_cols])),
+            "rows": torch.from_numpy(rows.astype(index)),
+            "cols": torch.from_numpy(cols.astype(index)),
+            "p": torch.from_numpy(p.astype(index)),
+            "q": torch.from_numpy(q.astype(index)),
+            "target": torch.from_numpy(target.astype(index)),
+            "num_upper": nu,
+            "gather": torch.from_numpy(gather),
+        }
 
     return topo.cached(("plan", "laplace_beltrami"), build)
 
@@ -353,11 +399,18 @@ def div_energy(verts, topo) -> torch.Tensor:
 
 
 def _laplace_beltrami_from(g_values: torch.Tensor, mass: torch.Tensor, topo: Topology) -> torch.Tensor:
-    pattern, p, q, rows = _laplace_beltrami_plan(topo)
+    plan = _laplace_beltrami_plan(topo)
     dev = g_values.device
-    scaled = g_values / torch.sqrt(mass).index_select(0, rows.to(dev))
-    vals = (scaled.index_select(0, p.to(dev)).conj() * scaled.index_select(0, q.to(dev))).real
-    return pattern.assemble(vals)
+    t = {k: (v.to(dev) if isinstance(v, torch.Tensor) else v) for k, v in plan.items()}
+    scaled = g_values / torch.sqrt(mass).index_select(0, t["rows"])
+    re, im = scaled.real, scaled.imag
+    nv = topo.num_vertices
+    diag = re.new_zeros(nv).index_add(0, t["cols"], re * re + im * im)
+    p, q = t["p"], t["q"]
+    prod = re.index_select(0, p) * re.index_select(0, q) + im.index_select(0, p) * im.index_select(0, q)
+    upper = re.new_zeros(t["num_upper"]).index_add(0, t["target"], prod)
+    values = torch.cat([diag, upper, upper]).index_select(0, t["gather"])
+    return sparse_coo(t["indices"], values, (nv, nv))
 
 
 def laplace_beltrami(verts, topo) -> torch.Tensor:
