@@ -146,6 +146,8 @@ class EdgePairPattern:
         ef = np.asarray(edge_faces, dtype=np.int64)
         ec = np.asarray(edge_corners, dtype=np.int64)
         ne, nf = ef.shape[0], fe.shape[0]
+        if ne + 6 * nf >= 2**32:
+            raise ValueError(f"mesh too large for EdgePairPattern: {ne} edges and {nf} faces")
         self.shape = (ne, ne)
         index = _index_dtype(ne + 6 * nf)
         closed = bool((ef >= 0).all())
@@ -161,13 +163,14 @@ class EdgePairPattern:
             if not closed:
                 missing = g < 0
                 cols[-1][missing] = cols[-2][missing] = ne  # the sentinel ne sorts last
-        # sort each row by column: a 9-comparator sorting network on (column, slot) keys
-        keys = [c * 8 + slot for slot, c in enumerate(cols)]
+                src[-1][missing] = src[-2][missing] = 0
+        # sort each row by column: a 9-comparator sorting network on keys (column << 32) | source
+        keys = [(c << 32) | s for c, s in zip(cols, src)]
         for i, j in _SORT5:
             keys[i], keys[j] = np.minimum(keys[i], keys[j]), np.maximum(keys[i], keys[j])
         keys = np.stack(keys, axis=1).ravel()  # row-major (E, 5) = COO order
-        src = np.concatenate(src)[(keys & 7) * ne + np.repeat(np.arange(ne), 5)]
-        cols = keys >> 3
+        cols = keys >> 32
+        src = keys & 0xFFFFFFFF
         rows = np.repeat(np.arange(ne), 5)
         if not closed:
             valid = cols < ne
