@@ -76,8 +76,7 @@ class EdgeOperators(nn.Module):
         geom = face_geometry(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         mass_values = ops._mass_values(geom, topo)
-        r1 = ops.pair_transport(geom, signs, 1)
-        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs, r1))
+        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
         e = self.edges.to(verts.device)
         self.verts = verts
         self.mass = ops.diagonal(mass_values)

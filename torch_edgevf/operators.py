@@ -74,8 +74,8 @@ def _pattern(topo: Topology, name: str) -> Pattern:
         ne, nv, nf = topo.num_edges, topo.num_vertices, topo.num_faces
         if name == "EE":
             return EdgePairPattern(fe, topo.edge_faces.numpy(), topo.edge_corners.numpy())
-        if name == "EV":
-            return Pattern(fe[:, _A], f[:, _B], (ne, nv))
+        if name == "EV":  # pair-major: contribution p F + f, for the corner pair p = 3a + b of face f
+            return Pattern(fe[:, _A].T, f[:, _B].T, (ne, nv))
         if name == "VV":
             return Pattern(f[:, _A], f[:, _B], (nv, nv))
         if name == "FE":
@@ -226,10 +226,23 @@ def _connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: To
     return pattern.assemble(diag, upper, upper.conj())
 
 
-def _gradient_values(geom: FaceGeometry, signs: torch.Tensor, r1=None) -> torch.Tensor:
-    r = pair_transport(geom, signs, 1) if r1 is None else r1
-    scale = pair_columns(signs * geom.lengths, "b") / 6
-    return (1j * scale * r.conj()).flatten()
+def _gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
+    """Per-face ``G`` contributions, corner-major ``(9 F,)`` in the order of ``_pattern(topo, "EV")``.
+
+    ``G[e_a, v_b] += i delta_b l_b / 6 r_ba`` simplifies, with ``r_ba = conj(r_ab)``, to
+    ``i delta_a l_a / 6`` for ``b = a``, ``-delta_a (2A + i d_c) / (6 l_a)`` for ``b = a + 1``
+    and ``-delta_a (-2A + i d_c) / (6 l_a)`` for ``b = a + 2`` (``c`` the third corner).
+    """
+    lt, dt, st = geom.lengths.t(), geom.dots.t(), signs.t()
+    a2 = geom.double_area
+    values = [None] * 9
+    for a in range(3):
+        nxt, prv = (a + 1) % 3, (a + 2) % 3
+        scale = -st[a] / (6 * lt[a])
+        values[3 * a + a] = torch.complex(torch.zeros_like(a2), st[a] * lt[a] / 6)
+        values[3 * a + nxt] = torch.complex(scale * a2, scale * dt[prv])
+        values[3 * a + prv] = torch.complex(-scale * a2, scale * dt[nxt])
+    return torch.stack(values).reshape(-1)
 
 
 def _covariant_values(geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor) -> torch.Tensor:
