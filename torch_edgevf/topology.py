@@ -96,8 +96,9 @@ class Topology:
             _check_orientation(edges, face_edges, sided)
 
         # each side of every edge: (face, corner opposite the edge), -1 if there is none
+        corner_side = 2 * face_edges.ravel() + slot
         side_corner = np.full(2 * ne, -1, dtype=np.int64)
-        side_corner[2 * face_edges.ravel() + slot] = np.arange(3 * nf)
+        side_corner[corner_side] = np.arange(3 * nf)
         has_face = side_corner >= 0
         face_of_side = side_corner // 3
         edge_faces = np.where(has_face, face_of_side, -1).reshape(ne, 2)
@@ -106,7 +107,7 @@ class Topology:
         opposite = f.ravel()[side_corner].reshape(ne, 2)
         if (has_face.reshape(ne, 2).all(axis=1) & (opposite[:, 0] == opposite[:, 1])).any():
             _check_duplicate_faces(f)
-        _check_manifold_vertices(f, nv, side_corner)
+        _check_manifold_vertices(f, nv, side_corner, corner_side)
 
         boundary_edges = counts == 1
         boundary_vertices = np.zeros(nv, dtype=bool)
@@ -280,7 +281,7 @@ def _check_orientation(edges, face_edges, sided) -> None:
         )
 
 
-def _check_manifold_vertices(f, nv, side_corner) -> None:
+def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
     """Every vertex's faces must form a single fan (connected through shared edges).
 
     The corners around a vertex are linked by ``next``: from corner ``k`` of a face, across
@@ -292,20 +293,17 @@ def _check_manifold_vertices(f, nv, side_corner) -> None:
     the pairing is injective here (manifold edges, consistent orientation checked before).
     """
     nc = 3 * f.shape[0]
-    corner = np.arange(nc)
-    within = corner % 3
-    # the side of the edge opposite corner k+2 (which leaves the vertex) in the other face
-    opposite_side = side_corner.reshape(-1, 2)[:, ::-1].ravel()  # side s -> corner on side 1 - s
-    side_of_corner = np.empty(nc, dtype=np.int64)
-    side_of_corner[side_corner[side_corner >= 0]] = np.flatnonzero(side_corner >= 0)
-    across = opposite_side[side_of_corner[corner - within + _PREV[within]]]
-    nxt = np.where(across >= 0, across - across % 3 + _PREV[across % 3], -1)
+    # corner k+2 of the same face; the edge opposite it leaves the vertex of corner k
+    third = np.arange(nc).reshape(-1, 3)[:, _PREV].ravel()
+    across = side_corner[corner_side[third] ^ 1]  # the corner across that edge, or -1
+    nxt = np.where(across >= 0, third[across], -1)
+    has_next = nxt >= 0
     prv = np.full(nc, -1, dtype=np.int64)
-    prv[nxt[nxt >= 0]] = corner[nxt >= 0]
+    prv[nxt[has_next]] = np.flatnonzero(has_next)
     vertex = f.ravel()
     count = np.bincount(vertex, minlength=nv)
     start = np.full(nv, -1, dtype=np.int64)
-    start[vertex] = corner  # one corner per referenced vertex
+    start[vertex] = np.arange(nc)  # one corner per referenced vertex
     vs = np.flatnonzero(start >= 0)
     c0 = start[vs]
     reached = np.ones(vs.shape[0], dtype=np.int64)
