@@ -1,6 +1,8 @@
 """Geometry: angles, areas, defects, dihedral angles, transport; bad input; gradients."""
 
 import math
+import platform
+import sys
 
 import numpy as np
 import pytest
@@ -134,3 +136,47 @@ def test_geometry_gradcheck():
         lambda x: torch.view_as_real(ev.transport_coefficients(x, t, n=3)),
     ):
         assert torch.autograd.gradcheck(fn, (v,))
+
+
+def test_geometry_reuse_sees_every_change_of_positions():
+    """Without autograd the last face geometry of a topology is reused only for equal positions.
+
+    In-place edits through a NumPy view do not bump torch's version counter, so the cache
+    must compare values: every such edit has to give new operators.
+    """
+    v, f = ev.icosphere(2)
+    topo = ev.Topology(f)
+    first = ev.mass_matrix(v, topo).values().clone()
+    assert torch.equal(ev.mass_matrix(v, topo).values(), first)  # reuse gives the same values
+    v.numpy()[:] *= 2.0  # in place, behind torch's back
+    assert torch.allclose(ev.mass_matrix(v, topo).values(), 4 * first)
+    v.mul_(0.5)  # in place, through torch
+    assert torch.allclose(ev.mass_matrix(v, topo).values(), first)
+    assert torch.allclose(ev.mass_matrix(v.float(), topo).values().double(), first, rtol=1e-6)
+
+
+def test_geometry_reuse_never_shares_an_autograd_graph():
+    """Two differentiable assemblies from the same positions can be back-propagated separately."""
+    v, f = ev.icosphere(1)
+    v = v.clone().requires_grad_()
+    topo = ev.Topology(f)
+    ev.connection_laplacian(v, topo, 1).values().abs().sum().backward()
+    g1 = v.grad.clone()
+    v.grad = None
+    ev.connection_laplacian(v, topo, 1).values().abs().sum().backward()  # would fail on a freed graph
+    assert torch.equal(v.grad, g1)
+    with torch.no_grad():
+        m = ev.mass_matrix(v, topo)
+    assert m.values().grad_fn is None
+    assert ev.mass_matrix(v, topo).values().grad_fn is not None
+
+
+def test_tune_allocator_validates_and_reports():
+    with pytest.raises(ValueError, match="keep_bytes"):
+        ev.tune_allocator(keep_bytes=-1)
+    with pytest.raises(ValueError, match="top_pad"):
+        ev.tune_allocator(top_pad=2**40)
+    applied = ev.tune_allocator()
+    assert isinstance(applied, bool)
+    if sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc":
+        assert applied
