@@ -51,6 +51,7 @@ from typing import NamedTuple
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
+from scipy.linalg.blas import get_blas_funcs
 import torch
 
 from ._utils import (
@@ -68,6 +69,8 @@ logger = logging.getLogger(__name__)
 
 METHODS = ("auto", "lanczos", "dense")
 _DENSE_MAX = 300
+_MAX_BLOCK = 6
+_CLUSTER_RTOL = 1e-5
 
 
 class EigenPairs(NamedTuple):
@@ -92,98 +95,202 @@ def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     return -eps * (scale if scale > 0 else 1.0)
 
 
-def _orthonormalize(W, V, MV, M, rng):
-    """M-orthonormalize ``W`` against ``V`` and within itself, twice for stability.
+class _Inner:
+    """The :math:`M` inner product on NumPy blocks (Euclidean when ``mmul`` is ``None``).
 
-    Returns ``(Q, MQ, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I``, ``V^H M Q = 0``.
+    Blocks are Fortran-ordered ``(n, b)`` arrays; the products are single BLAS ``gemm``
+    calls on them (conjugate transpose inside BLAS, in-place updates), so no ``(n, m)``
+    temporary is ever made: orthogonalization is bound by one read of the basis per pass.
     """
-    Q, MQ, C, R = _orthonormalize_once(W, V, MV, M, rng)
-    Q, MQ, C2, R2 = _orthonormalize_once(Q, V, MV, M, rng)
-    return Q, MQ, C + C2 @ R, R2 @ R
+
+    def __init__(self, dtype, mmul=None):
+        self.dtype = np.dtype(dtype)
+        self.mmul = mmul
+        self.gemm = get_blas_funcs("gemm", dtype=self.dtype)
+        self.trans = 2 if self.dtype.kind == "c" else 1
+        self.eps = float(np.finfo(self.dtype).eps)
+
+    def dot(self, V, W):
+        """``V^H M W`` (``V`` has M-orthonormal or arbitrary columns)."""
+        MW = W if self.mmul is None else self.mmul(W)
+        return self.gemm(1.0, V, MW, trans_a=self.trans)
+
+    def gram(self, W):
+        G = self.dot(W, W)
+        return (G + G.conj().T) / 2
+
+    def subtract(self, W, V, C):
+        """``W - V C``, in place when ``W`` is Fortran-ordered."""
+        return self.gemm(-1.0, V, C, beta=1.0, c=W, overwrite_c=True)
 
 
-def _orthonormalize_once(W, V, MV, M, rng):
-    """M-orthogonalize the block ``W`` against ``V`` (two passes) and within itself.
+def _orthonormalize(W, V, inner: _Inner, rng, lo=0, _depth=0):
+    """M-orthonormalize the block ``W`` against the M-orthonormal basis ``V`` and within itself.
 
-    Returns ``(Q, MQ, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I``, ``V^H M Q = 0``.
-    Directions lost to rank deficiency are replaced by random ones (with ``R`` zero there).
+    Returns ``(Q, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I`` and ``V^H M Q = 0``.
+
+    Classical Gram-Schmidt with the DGKS criterion: an optional first pass against the
+    columns ``V[:, lo:]`` (the Lanczos recurrence; it removes the large components), then
+    full passes against ``V`` until no column loses more than half its squared norm in a
+    pass (one pass nearly always, at most three).  The block is then orthonormalized
+    through the eigendecomposition of its Gram matrix; if that is ill conditioned the
+    whole procedure runs once more on the result.  Directions lost to rank deficiency
+    (``W`` numerically inside ``span V``) are replaced by random ones, with zero rows of
+    ``R``.
     """
-    C = MV.conj().T @ W
-    W = W - V @ C
-    C2 = MV.conj().T @ W
-    W = W - V @ C2
-    C = C + C2
-    MW = M @ W
-    d, U = scipy.linalg.eigh(W.conj().T @ MW)
-    d = np.maximum(d.real, 0.0)
-    good = d > 1e-24 * max(d.max(), 1e-300)
-    if not good.all():
-        fresh = rng.standard_normal((W.shape[0], int((~good).sum()))).astype(W.dtype)
-        Wg = W @ U[:, good] / np.sqrt(d[good])
-        basis = np.concatenate([V, Wg], axis=1)
-        mbasis = np.concatenate([MV, M @ Wg], axis=1)
-        for _ in range(2):
-            fresh = fresh - basis @ (mbasis.conj().T @ fresh)
-        Q, MQ = np.concatenate([Wg, fresh], axis=1), None
-        R = np.zeros((W.shape[1], W.shape[1]), dtype=W.dtype)
-        R[: int(good.sum())] = (np.sqrt(d[good])[:, None] * U[:, good].conj().T)
-        MQ = M @ Q
-        G = Q.conj().T @ MQ  # re-normalize the fresh directions
-        Lc = np.linalg.cholesky((G + G.conj().T) / 2)
-        T = np.linalg.inv(Lc).conj().T
-        return Q @ T, MQ @ T, C, np.linalg.solve(T, R)
-    scale = 1.0 / np.sqrt(d)
-    return W @ (U * scale), MW @ (U * scale), C, np.sqrt(d)[:, None] * U.conj().T
+    W = np.asfortranarray(W, dtype=inner.dtype)
+    b, cols = W.shape[1], V.shape[1]
+    C = np.zeros((cols, b), dtype=inner.dtype)
+    before = inner.gram(W).diagonal().real.copy()
+    scale = max(float(before.max()), np.finfo(float).tiny)
+    if cols:
+        if 0 < lo < cols:
+            Vl = V[:, lo:]
+            Cl = inner.dot(Vl, W)
+            W = inner.subtract(W, Vl, Cl)
+            C[lo:] += Cl
+            before = inner.gram(W).diagonal().real.copy()
+        for _ in range(3):
+            Ci = inner.dot(V, W)
+            W = inner.subtract(W, V, Ci)
+            C += Ci
+            removed = np.einsum("ij,ij->j", Ci.conj(), Ci).real
+            if np.all(removed <= 0.5 * before):
+                break
+            before = inner.gram(W).diagonal().real.copy()
+    d, U = scipy.linalg.eigh(inner.gram(W))
+    d = np.maximum(d, 0.0)
+    good = d > (1e3 * inner.eps) ** 2 * scale
+    if good.all():
+        sd = np.sqrt(d)
+        Q = inner.gemm(1.0, W, U / sd)
+        R = sd[:, None] * U.conj().T
+    else:
+        ng = int(good.sum())
+        sd = np.sqrt(d[good])
+        Qg = inner.gemm(1.0, W, U[:, good] / sd)
+        fresh = rng.standard_normal((W.shape[0], b - ng)).astype(inner.dtype)
+        Qf, _, _ = _orthonormalize(fresh, np.asfortranarray(np.concatenate([V, Qg], axis=1)),
+                                   inner, rng, _depth=_depth + 1)
+        Q = np.asfortranarray(np.concatenate([Qg, Qf], axis=1))
+        R = np.zeros((b, b), dtype=inner.dtype)
+        R[:ng] = sd[:, None] * U[:, good].conj().T
+        d = d[good]
+    if d.size and d.min() < 1e-4 * d.max() and _depth < 2:
+        # within-block cancellation: the normalized columns may have regained components
+        # along V; one more round (rare)
+        Q, C2, R2 = _orthonormalize(Q, V, inner, rng, _depth=_depth + 1)
+        C, R = C + C2 @ R, R2 @ R
+    return Q, C, R
 
 
-def _lanczos(op, M, n, k, dtype, *, ncv, block, tol, maxiter, v0):
+def _largest_cluster(theta, resid, tol):
+    """Size of the largest group of (nearly) equal, well converged Ritz values.
+
+    A block Lanczos of block size ``b`` finds ``min(mult, b)`` copies of an eigenvalue of
+    multiplicity ``mult`` (exactly so in exact arithmetic): a cluster of ``b`` equal Ritz
+    values is the visible trace of a possibly larger multiplicity.
+    """
+    conv = resid <= max(np.sqrt(tol), 1e3 * tol) * np.abs(theta)
+    vals = theta[conv]
+    if vals.size < 2:
+        return int(vals.size)
+    rel = np.abs(np.diff(vals)) <= _CLUSTER_RTOL * np.abs(vals[1:])
+    best = run = 1
+    for same in rel:
+        run = run + 1 if same else 1
+        best = max(best, run)
+    return best
+
+
+def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None, max_block=None):
     """Block thick-restart Lanczos for the ``k`` largest eigenvalues of ``op`` (M-self-adjoint).
 
-    The block size ``block`` bounds the multiplicity of the eigenvalues it can resolve
-    (symmetric meshes have clusters of up to 5 or 6 equal eigenvalues).  Returns Ritz
-    values ``theta`` (k,) descending, Ritz vectors (n, k), and the number of solves.
+    ``op`` maps a Fortran-ordered ``(n, b)`` block to a block.  The basis holds at most
+    ``ncv`` columns; a restart keeps the ``keep`` leading Ritz vectors (default half the
+    basis, at least ``k``).  Convergence -- Ritz residual ``||T y - theta y||_M <= tol
+    |theta|`` for the ``k`` leading pairs, read off the last block of the Lanczos
+    relation -- is tested after every block, so that the basis is filled only as far as
+    needed.
+
+    The block size bounds the multiplicity of the eigenvalues that are found for sure.
+    With ``max_block > block`` the block grows to ``max_block`` as soon as the converged
+    Ritz values show a cluster of ``block`` equal values (a possibly larger multiplicity,
+    see :func:`_largest_cluster`): a thick restart whose new block is the residual block
+    completed with random directions.  Convergence is then accepted only after at least
+    as many further solves as before the growth, so that the missing copies have time to
+    appear.  Returns Ritz values ``theta`` (k,) descending, Ritz vectors (n, k), and the
+    number of columns ``op`` was applied to.
     """
     b = block
-    m = b * max(-(-ncv // b), -(-(k + 2 * b) // b))
-    m = min(m, b * (n // b) - b) if n > 2 * b else m
-    p = m - b * max(1, (m - k) // (2 * b))
+    max_block = max(block, max_block or block)
+    m = min(max(ncv, k + 2 * max_block), n - max_block)
+    p = max(k, m // 2) if keep is None else keep
     rng = np.random.default_rng(0)
-    V = np.zeros((n, m + b), dtype=dtype)
-    MV = np.zeros_like(V)
-    H = np.zeros((m, m), dtype=dtype)
-    start = np.asarray(v0, dtype=dtype).reshape(n, -1)
+    V = np.empty((n, m), dtype=inner.dtype, order="F")
+    H = np.zeros((m, m), dtype=inner.dtype)
+    start = np.asarray(v0, dtype=inner.dtype).reshape(n, -1)[:, :b]
     if start.shape[1] < b:
-        extra = rng.standard_normal((n, b - start.shape[1])).astype(dtype)
-        start = np.concatenate([start, extra], axis=1)
-    V[:, :b], MV[:, :b], _, _ = _orthonormalize(start[:, :b], V[:, :0], MV[:, :0], M, rng)
-    cols, n_op = b, 0
-    for _ in range(maxiter):
-        while cols <= m:
-            W = op(MV[:, cols - b: cols])
-            n_op += b
-            Q, MQ, C, R = _orthonormalize(W, V[:, :cols], MV[:, :cols], M, rng)
-            H[:cols, cols - b: cols] = C
-            if cols + b <= m:
-                H[cols: cols + b, cols - b: cols] = R
-            else:
-                B = R
-            V[:, cols: cols + b], MV[:, cols: cols + b] = Q, MQ
+        start = np.concatenate([start, rng.standard_normal((n, b - start.shape[1])).astype(inner.dtype)], axis=1)
+    V[:, :b], _, _ = _orthonormalize(start, V[:, :0], inner, rng)
+    cols, lo, n_op, restarts, settle = b, 0, 0, 0, 0
+    while True:
+        W = op(V[:, cols - b: cols])
+        n_op += b
+        Q, C, R = _orthonormalize(W, V[:, :cols], inner, rng, lo=lo)
+        H[:cols, cols - b: cols] = C
+        grow = False
+        if cols >= k:
+            theta, S = scipy.linalg.eigh((H[:cols, :cols] + H[:cols, :cols].conj().T) / 2)
+            theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
+            coupling = R @ S[cols - b: cols]
+            resid = np.linalg.norm(coupling, axis=0)
+            grow = b < max_block and _largest_cluster(theta[:k], resid[:k], tol) >= b
+            if not grow and n_op >= settle and np.all(resid[:k] <= tol * np.abs(theta[:k])):
+                break
+        if cols + b <= m and not grow:
+            V[:, cols: cols + b] = Q
+            H[cols: cols + b, cols - b: cols] = R
+            lo = cols - b
             cols += b
-        theta, S = scipy.linalg.eigh((H + H.conj().T) / 2)
-        theta, S = theta[::-1], S[:, ::-1]
-        resid = np.linalg.norm(B @ S[m - b: m, :k], axis=0)
-        if np.all(resid <= tol * np.abs(theta[:k])):
+            continue
+        if restarts == maxiter:
+            logger.warning("Lanczos did not converge in %d restarts (residual %.1e)", maxiter,
+                           float(np.max(resid[:k] / np.abs(theta[:k]))))
             break
-        V[:, :p] = V[:, :m] @ S[:, :p]
-        MV[:, :p] = MV[:, :m] @ S[:, :p]
-        V[:, p: p + b], MV[:, p: p + b] = V[:, m:], MV[:, m:]
+        restarts += 1
+        nb = max_block if grow else b
+        q = min(max(p, k), m - nb, cols)
+        V[:, :q] = inner.gemm(1.0, V[:, :cols], S[:, :q])
+        V[:, q: q + b] = Q
         H[:] = 0
-        H[:p, :p] = np.diag(theta[:p])
-        H[p: p + b, :p] = B @ S[m - b: m, :p]
-        cols = p + b
-    else:
-        logger.warning("Lanczos did not converge in %d restarts (residual %.1e)", maxiter, resid.max())
-    return theta[:k], V[:, :m] @ S[:, :k], n_op
+        H[:q, :q] = np.diag(theta[:q])
+        H[q: q + b, :q] = coupling[:, :q]
+        if grow:
+            logger.debug("Lanczos: block size %d -> %d after %d solves (cluster of %d equal Ritz values)",
+                         b, nb, n_op, b)
+            fresh = rng.standard_normal((n, nb - b)).astype(inner.dtype)
+            V[:, q + b: q + nb], _, _ = _orthonormalize(fresh, V[:, :q + b], inner, rng)
+            settle = 2 * n_op
+            b = nb
+        cols, lo = q + b, 0
+    return theta[:k], inner.gemm(1.0, V[:, :cols], S[:, :k]), n_op
+
+
+def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
+    """The k = 1 fast path: inverse iteration with the factor, Rayleigh-Ritz accelerated.
+
+    Each step is one solve with the existing factor (shift-invert inverse iteration);
+    instead of keeping only the last iterate, the Rayleigh-Ritz step runs on all the
+    iterates so far (the Krylov space of inverse iteration, i.e. single-vector Lanczos
+    with full reorthogonalization), which converges like Chebyshev-accelerated inverse
+    iteration.  It stops as soon as the Ritz residual of the leading pair is below
+    ``tol |theta|`` (tested after every solve) and restarts from the three leading Ritz
+    vectors when ``ncv`` (default 24) iterates are stored.
+    """
+    ncv = min(ncv or 24, max(n - 1, 2))
+    keep = min(3, max(1, ncv // 2))
+    return _lanczos(op, inner, n, 1, block=1, ncv=ncv, tol=tol, maxiter=maxiter, v0=v0, keep=keep)
 
 
 def _rayleigh_ritz(A, M, X):
@@ -255,6 +362,59 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
     return W
 
 
+def _diagonal(M: sp.spmatrix):
+    """The diagonal of ``M`` if ``M`` is diagonal, else ``None``."""
+    M = M.tocsc()
+    if M.nnz > M.shape[0] or np.any(np.diff(M.indptr) > 1):
+        return None
+    if M.nnz and not np.array_equal(M.indices, np.flatnonzero(np.diff(M.indptr))):
+        return None
+    return M.diagonal()
+
+
+def _shift_invert_eigsh(A, M, factor, k, *, tol, maxiter, ncv, v0, block_size):
+    r"""The ``k`` smallest eigenpairs of ``(A, M)`` with the factor of ``A - sigma M``.
+
+    Lanczos runs on :math:`T = (A - \sigma M)^{-1} M`, self-adjoint in the :math:`M` inner
+    product.  For a diagonal ``M`` (the lumped mass matrices) it runs in the coordinates
+    :math:`y = M^{1/2} x`, where ``T`` becomes :math:`M^{1/2} (A - \sigma M)^{-1} M^{1/2}` and
+    the inner product Euclidean.  A final Rayleigh-Ritz step on :math:`(A, M)` gives the
+    eigenvalues and :math:`M`-orthonormal vectors.
+    """
+    n = A.shape[0]
+    dtype = A.dtype
+    mdiag = _diagonal(M)
+    rng = np.random.default_rng(0)
+    start = rng.standard_normal(n) if v0 is None else np.asarray(v0)
+    start = start.reshape(n, -1)
+    if mdiag is not None:
+        s = np.sqrt(mdiag).astype(np.finfo(dtype).dtype)[:, None]
+        inner = _Inner(dtype)
+
+        def op(Y):
+            Z = np.asfortranarray(factor.solve(Y * s))
+            Z *= s
+            return Z
+
+        start = start * s
+    else:
+        inner = _Inner(dtype, mmul=lambda W: np.asfortranarray(M @ W))
+
+        def op(Y):
+            return np.asfortranarray(factor.solve(M @ Y))
+
+    if k == 1 and block_size in (None, 1):
+        _, Y, n_op = _smallest_pair(op, inner, n, tol=tol, maxiter=maxiter, v0=start, ncv=ncv)
+    else:
+        block, max_block = (block_size, block_size) if block_size else (min(k, 2), min(k, _MAX_BLOCK))
+        _, Y, n_op = _lanczos(op, inner, n, k, block=block, max_block=max_block,
+                              ncv=ncv or max(3 * k, 2 * k + 2 * max_block), tol=tol, maxiter=maxiter,
+                              v0=start)
+    logger.debug("Lanczos: %d solves for k=%d", n_op, k)
+    X = Y / s if mdiag is not None else Y
+    return _rayleigh_ritz(A, M, X)
+
+
 class _Eigsh(torch.autograd.Function):
     @staticmethod
     @blas_single_thread
@@ -272,12 +432,8 @@ class _Eigsh(torch.autograd.Function):
         else:
             K = (A - sigma * M).tocsc()
             ctx.factor = factorize(K, "auto", hermitian=True)
-            v0 = np.random.default_rng(0).standard_normal(A.shape[0]) if v0 is None else v0
-            block = block_size or min(k, 6)
-            _, X, n_op = _lanczos(ctx.factor.solve, M, A.shape[0], k, A.dtype, ncv=ncv or 2 * k + block,
-                                  block=block, tol=tol, maxiter=maxiter, v0=v0)
-            logger.debug("Lanczos: %d solves for k=%d", n_op, k)
-            lam, X = _rayleigh_ritz(A, M, X)
+            lam, X = _shift_invert_eigsh(A, M, ctx.factor, k, tol=tol, maxiter=maxiter, ncv=ncv,
+                                         v0=v0, block_size=block_size)
         X = _fix_phase(X)
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
         ctx.a_data, ctx.m_data = a_data, m_data
