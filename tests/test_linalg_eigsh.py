@@ -201,3 +201,110 @@ def test_error_nan_and_method():
         eigsh(p.A, m, 2)
     with pytest.raises(ValueError, match="method must be one of"):
         eigsh(p.A, p.m, 2, method="arpack")
+
+
+# ------------------------------------------------------------------ k = 1 fast path
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_smallest_pair_fast_path_matches_general_path_and_dense(dtype, caplog):
+    """k = 1 runs the dedicated inverse-iteration path; it agrees with the block path and eigh."""
+    import logging
+
+    p = grid_laplacian(12, 13, dtype, shift=0.05)
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+        lam, X = eigsh(p.A, p.m, 1, method="lanczos")
+    lam_gen, X_gen = eigsh(p.A, p.m, 1, method="lanczos", block_size=2)  # general block path
+    ref_lam, ref_X = reference(p, 1)
+    np.testing.assert_allclose(lam.numpy(), ref_lam, rtol=1e-12)
+    torch.testing.assert_close(lam, lam_gen, rtol=1e-12, atol=0)
+    Md = torch.diag(p.m).to(dtype)
+    assert abs(float((X.mH @ Md @ X).real) - 1) < 1e-12
+    # same vector as the general path and the dense reference (phase convention fixes it)
+    torch.testing.assert_close(X, X_gen, atol=1e-9, rtol=0)
+    overlap = (X.mH @ Md @ torch.from_numpy(ref_X).to(dtype)).abs()
+    assert abs(float(overlap) - 1) < 1e-12
+    A = p.A.to_dense()
+    residual = (A @ X - Md @ X * lam.to(dtype)).norm() / (A @ X).norm()
+    assert float(residual) < 1e-10
+    assert any("solves for k=1" in r.getMessage() for r in caplog.records)
+
+
+def test_smallest_pair_falls_back_when_the_basis_is_exhausted():
+    """With a tiny basis the fast path hands over to the restarted general path."""
+    p = grid_laplacian(12, 13, torch.complex128, shift=0.05)
+    lam, _ = eigsh(p.A, p.m, 1, method="lanczos", ncv=3)
+    np.testing.assert_allclose(lam.numpy(), reference(p, 1)[0], rtol=1e-12)
+
+
+def test_smallest_pair_singular_laplacian():
+    """A zero eigenvalue (constant kernel): inverse iteration converges in a few steps."""
+    p = grid_laplacian(10, 12, torch.float64)
+    lam, X = eigsh(p.A, p.m, 1, method="lanczos")
+    assert abs(float(lam[0])) < 1e-10
+    const = X[:, 0] / X[:, 0].mean()
+    torch.testing.assert_close(const, torch.ones_like(const), atol=1e-8, rtol=0)
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_gradcheck_smallest_pair(dtype):
+    """Gradients of the k = 1 path: eigenvalue, gauge-invariant and phase-fixed vector losses."""
+    p = grid_laplacian(3, 4, dtype)
+
+    def f(params, m):
+        lam, X = eigsh(p.hermitian(params), m, 1, method="lanczos")
+        return lam, X.abs() ** 2, X
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
+
+
+# --------------------------------------------------------------- adaptive block size
+
+
+def test_block_grows_on_multiple_eigenvalues_without_symmetry(caplog):
+    """Three identical disconnected grids: every eigenvalue is triple, beyond the initial block of 2."""
+    import logging
+
+    p = grid_laplacian(6, 7, torch.complex128, shift=0.1)
+    A = p.A.to_dense()
+    Z = torch.zeros_like(A)
+    big = torch.cat([torch.cat([A, Z, Z], 1), torch.cat([Z, A, Z], 1), torch.cat([Z, Z, A], 1)])
+    m = p.m.repeat(3)
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+        lam = eigsh(big.to_sparse(), m, 9, method="lanczos").values
+    ref = eigsh(big.to_sparse(), m, 9, method="dense").values
+    torch.testing.assert_close(lam, ref, rtol=1e-10, atol=1e-12)
+    assert any("block size 2 -> 6" in r.getMessage() for r in caplog.records)
+
+
+def test_no_block_growth_on_a_simple_spectrum(caplog):
+    import logging
+
+    p = grid_laplacian(9, 11, torch.complex128, shift=0.1)
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+        lam = eigsh(p.A, p.m, 8, method="lanczos").values
+    np.testing.assert_allclose(lam.numpy(), reference(p, 8)[0], rtol=1e-10)
+    assert not any("block size" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("block_size", [1, 3, 6])
+def test_explicit_block_size(block_size):
+    p = grid_laplacian(9, 11, torch.complex128, shift=0.1)
+    lam = eigsh(p.A, p.m, 7, method="lanczos", block_size=block_size).values
+    np.testing.assert_allclose(lam.numpy(), reference(p, 7)[0], rtol=1e-10)
+
+
+def test_general_sparse_mass_path():
+    """A non-diagonal mass runs Lanczos in the M inner product (no M^{1/2} change of variables)."""
+    p = grid_laplacian(8, 9, torch.complex128, shift=0.1)
+    n = p.n
+    ar = torch.arange(n - 1)
+    mi = torch.cat([torch.stack([ar, ar + 1]), torch.stack([ar + 1, ar]), torch.arange(n).expand(2, -1)], 1)
+    mv = torch.cat([torch.full((2 * (n - 1),), 0.05, dtype=torch.float64), p.m])
+    Msp = torch.sparse_coo_tensor(mi, mv, (n, n)).coalesce()
+    for k in (1, 5):
+        lam, X = eigsh(p.A, Msp, k, method="lanczos")
+        ref = scipy.linalg.eigh(p.A.to_dense().numpy(), Msp.to_dense().numpy(), eigvals_only=True)[:k]
+        np.testing.assert_allclose(lam.numpy(), ref, rtol=1e-10)
+        Md = Msp.to_dense().to(torch.complex128)
+        torch.testing.assert_close(X.mH @ Md @ X, torch.eye(k, dtype=X.dtype), atol=1e-10, rtol=0)

@@ -282,15 +282,65 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
 
     Each step is one solve with the existing factor (shift-invert inverse iteration);
     instead of keeping only the last iterate, the Rayleigh-Ritz step runs on all the
-    iterates so far (the Krylov space of inverse iteration, i.e. single-vector Lanczos
-    with full reorthogonalization), which converges like Chebyshev-accelerated inverse
-    iteration.  It stops as soon as the Ritz residual of the leading pair is below
-    ``tol |theta|`` (tested after every solve) and restarts from the three leading Ritz
-    vectors when ``ncv`` (default 24) iterates are stored.
+    iterates so far (their Krylov space, i.e. single-vector Lanczos), which converges like
+    Chebyshev-accelerated inverse iteration.  It stops as soon as the Ritz residual of the
+    leading pair is below ``tol |theta|``, tested after every solve.
+
+    A step orthogonalizes against the last two vectors only (the three-term recurrence,
+    twice), plus selective orthogonalization (Parlett and Scott) against the Ritz vectors
+    whose residual fell below ``sqrt(eps) theta_max``: by Paige's theorem the Lanczos
+    vectors lose orthogonality only in their direction, so the basis stays semi-orthogonal
+    and the Ritz pairs are accurate to working precision, without the full
+    reorthogonalization (a pass over the whole basis per step) of the general path.  If
+    ``ncv`` (default 24) steps do not suffice, the general thick-restart Lanczos takes over
+    from the best Ritz vector.
     """
-    ncv = min(ncv or 24, max(n - 1, 2))
-    keep = min(3, max(1, ncv // 2))
-    return _lanczos(op, inner, n, 1, block=1, ncv=ncv, tol=tol, maxiter=maxiter, v0=v0, keep=keep)
+    m = max(3, min(ncv or 24, n - 2))
+    rng = np.random.default_rng(0)
+    V = np.empty((n, m), dtype=inner.dtype, order="F")
+    H = np.zeros((m, m), dtype=inner.dtype)
+    start = np.asarray(v0, dtype=inner.dtype).reshape(n, -1)[:, :1]
+    V[:, :1], _, _ = _orthonormalize(start, V[:, :0], inner, rng)
+    good = np.zeros((n, 0), dtype=inner.dtype, order="F")  # selective orthogonalization set
+    good_idx: list[int] = []
+    sqrt_eps = np.sqrt(inner.eps)
+    for j in range(m):
+        w = np.asfortranarray(op(V[:, j: j + 1]), dtype=inner.dtype)
+        lo = max(0, j - 1)
+        Vl = V[:, lo: j + 1]
+        c = inner.dot(Vl, w)
+        w = inner.subtract(w, Vl, c)
+        c2 = inner.dot(Vl, w)
+        w = inner.subtract(w, Vl, c2)
+        H[lo: j + 1, j] = (c + c2)[:, 0]
+        if good.shape[1]:
+            for _ in range(2):
+                w = inner.subtract(w, good, inner.dot(good, w))
+        beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
+        theta, S = scipy.linalg.eigh((H[: j + 1, : j + 1] + H[: j + 1, : j + 1].conj().T) / 2)
+        theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
+        resid = beta * np.abs(S[j])
+        if resid[0] <= tol * abs(theta[0]):
+            return theta[:1], inner.gemm(1.0, V[:, : j + 1], S[:, :1]), j + 1
+        if beta <= inner.eps * abs(theta[0]) or j + 1 == m:
+            break
+        # Ritz vectors that converged to sqrt(eps) join the selective orthogonalization set
+        new = [i for i in np.flatnonzero(resid <= sqrt_eps * abs(theta[0])) if i not in good_idx]
+        if new:
+            Y = inner.gemm(1.0, V[:, : j + 1], S[:, new])
+            good = np.asfortranarray(np.concatenate([good, Y], axis=1))
+            good_idx += new  # Ritz pairs are tracked by rank (index 0: the leading pair)
+            w = inner.subtract(w, Y, inner.dot(Y, w))
+            beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
+        V[:, j + 1: j + 2] = w / beta
+        H[j + 1, j] = beta
+    # not converged in m steps (or an invariant subspace): the robust general path, from
+    # the best Ritz vectors so far
+    ncol = min(3, S.shape[1])
+    start = inner.gemm(1.0, V[:, : S.shape[0]], S[:, :ncol])
+    theta, X, n_op = _lanczos(op, inner, n, 1, block=1, ncv=m, tol=tol, maxiter=maxiter, v0=start,
+                              keep=min(3, m // 2))
+    return theta, X, n_op + S.shape[0]
 
 
 def _rayleigh_ritz(A, M, X):
@@ -383,6 +433,9 @@ def _shift_invert_eigsh(A, M, factor, k, *, tol, maxiter, ncv, v0, block_size):
     """
     n = A.shape[0]
     dtype = A.dtype
+    max_block = block_size or min(k, _MAX_BLOCK)
+    if n < k + 3 * max_block + 3:  # too small for a restarted Krylov basis
+        return _eig_dense(A, M, k)
     mdiag = _diagonal(M)
     rng = np.random.default_rng(0)
     start = rng.standard_normal(n) if v0 is None else np.asarray(v0)
