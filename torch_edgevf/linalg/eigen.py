@@ -60,6 +60,7 @@ from ._utils import (
     as_sparse,
     blas_single_thread,
     from_numpy,
+    pattern_outer,
     real_dtype,
     to_numpy,
 )
@@ -366,7 +367,7 @@ def _eig_dense(A, M, k):
 
 
 def _pattern_outer(left, right, data: SparseData):
-    return (left[data.row] * right[data.col].conj()).sum(-1)
+    return pattern_outer(left, right, data).to(left.device)
 
 
 def _to_input(grad, values):

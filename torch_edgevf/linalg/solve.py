@@ -19,14 +19,22 @@ from __future__ import annotations
 
 import torch
 
-from ._utils import SparseData, as_sparse, check_finite, check_rhs, complex_dtype, from_numpy, to_numpy
+from ._utils import (
+    SparseData,
+    as_sparse,
+    check_finite,
+    check_rhs,
+    complex_dtype,
+    from_numpy,
+    pattern_outer,
+    to_numpy,
+)
 from .factor import SparseSolver
 
 
 def _pattern_outer(left: torch.Tensor, right: torch.Tensor, data: SparseData) -> torch.Tensor:
     r"""Entries :math:`\sum_c l_{ic} \bar r_{jc}` of :math:`l r^H` on the pattern of ``data``."""
-    prod = left[data.row] * right[data.col].conj()
-    return prod if prod.dim() == 1 else prod.sum(-1)
+    return pattern_outer(left, right, data).to(left.device)
 
 
 def _as_input_dtype(grad: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
@@ -52,10 +60,11 @@ class _Solve(torch.autograd.Function):
         lam = from_numpy(solver.factor.solve(to_numpy(g), not ctx.adjoint), g, x.dtype)
         grad_values = grad_b = None
         if ctx.needs_input_grad[0]:
+            # (the sign goes on an (N,) vector, not on the (nnz,) result)
             if ctx.adjoint:  # x = A^{-H} b:  dL/dA_ij = -x_i conj(lam_j)
-                grad_values = -_pattern_outer(x, lam, solver.data)
+                grad_values = _pattern_outer(-x, lam, solver.data)
             else:
-                grad_values = -_pattern_outer(lam, x, solver.data)
+                grad_values = _pattern_outer(-lam, x, solver.data)
             grad_values = _as_input_dtype(grad_values, values)
         if ctx.needs_input_grad[1]:
             grad_b = _as_input_dtype(lam, b)
