@@ -7,10 +7,20 @@ self-adjoint in the :math:`M` inner product; :math:`A - \sigma M` is factored on
 :func:`~torch_edgevf.linalg.factor.factorize` (Cholesky type for :math:`\sigma` below the
 spectrum).  Complex Hermitian problems get a Hermitian Lanczos, not the non-Hermitian
 Arnoldi that SciPy's ``eigsh`` falls back to for complex input.  The default shift is
-slightly negative, :math:`\sigma = -10^{-6} s` (``1e-3 s`` in single precision), with
-:math:`s = \max_i A_{ii} / M_{ii}`, so that :math:`A - \sigma M` is positive definite
-for the (often singular) positive semidefinite Laplacians.  A final Rayleigh-Ritz step on
-:math:`(A, M)` makes the eigenvectors :math:`M`-orthonormal: :math:`X^H M X = I`.
+slightly negative, :math:`\sigma = -10^{-4} s` (``1e-3 s`` in single precision), with
+:math:`s = \mathrm{median}_i A_{ii} / M_{ii}`, so that :math:`A - \sigma M` is positive
+definite for the (often singular) positive semidefinite Laplacians.  A final Rayleigh-Ritz
+step on :math:`(A, M)` makes the eigenvectors :math:`M`-orthonormal: :math:`X^H M X = I`.
+
+What makes it fast (see :func:`_lanczos`): for a diagonal :math:`M` (lumped masses) the
+iteration runs in the coordinates :math:`M^{1/2} x` with the Euclidean inner product;
+the basis is orthogonalized by classical Gram-Schmidt in BLAS ``gemm`` calls on a
+Fortran-ordered basis (a pass against the last two blocks, then one full pass, a second
+only when the DGKS criterion asks for it); convergence is tested after every block; the
+block size starts at 2 and grows to 6 only when the Ritz values show a cluster of equal
+values (a multiple eigenvalue: symmetric meshes).  ``k = 1`` has its own path,
+:func:`_smallest_pair`: inverse iteration with the factor, accelerated by Rayleigh-Ritz
+on its iterates, with selective instead of full reorthogonalization.
 
 Phase convention: each eigenvector is scaled by a unit number so that its entry of
 largest modulus is real and positive (a sign for real problems).  This makes the result
@@ -125,7 +135,7 @@ class _Inner:
         return self.gemm(-1.0, V, C, beta=1.0, c=W, overwrite_c=True)
 
 
-def _orthonormalize(W, V, inner: _Inner, rng, lo=0, _depth=0):
+def _orthonormalize(W, V, inner: _Inner, rng, lo=0, out=None, _depth=0):
     """M-orthonormalize the block ``W`` against the M-orthonormal basis ``V`` and within itself.
 
     Returns ``(Q, C, R)`` with ``W = V C + Q R``, ``Q^H M Q = I`` and ``V^H M Q = 0``.
@@ -137,7 +147,8 @@ def _orthonormalize(W, V, inner: _Inner, rng, lo=0, _depth=0):
     through the eigendecomposition of its Gram matrix; if that is ill conditioned the
     whole procedure runs once more on the result.  Directions lost to rank deficiency
     (``W`` numerically inside ``span V``) are replaced by random ones, with zero rows of
-    ``R``.
+    ``R``.  ``out``, a Fortran-ordered ``(n, b)`` array (a slice of the basis), receives
+    ``Q`` in place.
     """
     W = np.asfortranarray(W, dtype=inner.dtype)
     b, cols = W.shape[1], V.shape[1]
@@ -164,7 +175,10 @@ def _orthonormalize(W, V, inner: _Inner, rng, lo=0, _depth=0):
     good = d > (1e3 * inner.eps) ** 2 * scale
     if good.all():
         sd = np.sqrt(d)
-        Q = inner.gemm(1.0, W, U / sd)
+        if out is not None:
+            Q = inner.gemm(1.0, W, U / sd, c=out, overwrite_c=True)
+        else:
+            Q = inner.gemm(1.0, W, U / sd)
         R = sd[:, None] * U.conj().T
     else:
         ng = int(good.sum())
@@ -182,7 +196,17 @@ def _orthonormalize(W, V, inner: _Inner, rng, lo=0, _depth=0):
         # along V; one more round (rare)
         Q, C2, R2 = _orthonormalize(Q, V, inner, rng, _depth=_depth + 1)
         C, R = C + C2 @ R, R2 @ R
+    if out is not None and not np.may_share_memory(Q, out):
+        out[...] = Q
+        Q = out
     return Q, C, R
+
+
+def _rotate(V, cols, S, q, rows=4096):
+    """``V[:, :q] = V[:, :cols] @ S[:, :q]`` in place, by row blocks (no ``(n, q)`` temporary)."""
+    Sq = np.ascontiguousarray(S[:cols, :q])
+    for r in range(0, V.shape[0], rows):
+        V[r: r + rows, :q] = V[r: r + rows, :cols] @ Sq
 
 
 def _largest_cluster(theta, resid, tol):
@@ -238,7 +262,8 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
     while True:
         W = op(V[:, cols - b: cols])
         n_op += b
-        Q, C, R = _orthonormalize(W, V[:, :cols], inner, rng, lo=lo)
+        slot = V[:, cols: cols + b] if cols + b <= m else None
+        Q, C, R = _orthonormalize(W, V[:, :cols], inner, rng, lo=lo, out=slot)
         H[:cols, cols - b: cols] = C
         grow = False
         if cols >= k:
@@ -250,8 +275,7 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
             if not grow and n_op >= settle and np.all(resid[:k] <= tol * np.abs(theta[:k])):
                 break
         if cols + b <= m and not grow:
-            V[:, cols: cols + b] = Q
-            H[cols: cols + b, cols - b: cols] = R
+            H[cols: cols + b, cols - b: cols] = R  # (Q is already V[:, cols: cols + b])
             lo = cols - b
             cols += b
             continue
@@ -262,8 +286,8 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
         restarts += 1
         nb = max_block if grow else b
         q = min(max(p, k), m - nb, cols)
-        V[:, :q] = inner.gemm(1.0, V[:, :cols], S[:, :q])
-        V[:, q: q + b] = Q
+        _rotate(V, cols, S, q)
+        V[:, q: q + b] = Q  # (numpy buffers the copy if Q overlaps, as a view of V)
         H[:] = 0
         H[:q, :q] = np.diag(theta[:q])
         H[q: q + b, :q] = coupling[:, :q]
@@ -423,35 +447,53 @@ def _diagonal(M: sp.spmatrix):
     return M.diagonal()
 
 
-def _shift_invert_eigsh(A, M, factor, k, *, tol, maxiter, ncv, v0, block_size):
-    r"""The ``k`` smallest eigenpairs of ``(A, M)`` with the factor of ``A - sigma M``.
+class _ScaledFactor:
+    """Solves with :math:`K = S \tilde K S` from a factor of :math:`\tilde K` (``S`` diagonal, ``s``)."""
+
+    def __init__(self, factor, s):
+        self.factor, self.s = factor, s
+
+    def solve(self, b, adjoint=False):
+        s = self.s if b.ndim == 1 else self.s[:, None]
+        return self.factor.solve(b / s, adjoint) / s
+
+
+def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
+    r"""The ``k`` smallest eigenpairs of ``(A, M)`` by shift-invert Lanczos.
 
     Lanczos runs on :math:`T = (A - \sigma M)^{-1} M`, self-adjoint in the :math:`M` inner
     product.  For a diagonal ``M`` (the lumped mass matrices) it runs in the coordinates
-    :math:`y = M^{1/2} x`, where ``T`` becomes :math:`M^{1/2} (A - \sigma M)^{-1} M^{1/2}` and
+    :math:`y = M^{1/2} x`, on :math:`T = (\tilde A - \sigma I)^{-1}` with :math:`\tilde A =
+    M^{-1/2} A M^{-1/2}`: the scaled matrix is factored, so that a step is a bare solve and
     the inner product Euclidean.  A final Rayleigh-Ritz step on :math:`(A, M)` gives the
-    eigenvalues and :math:`M`-orthonormal vectors.
+    eigenvalues and :math:`M`-orthonormal vectors.  Returns ``(lam, X, factor)``, where
+    ``factor.solve`` solves with :math:`A - \sigma M` (``None`` on the dense fallback).
     """
     n = A.shape[0]
     dtype = A.dtype
     max_block = block_size or min(k, _MAX_BLOCK)
     if n < k + 3 * max_block + 3:  # too small for a restarted Krylov basis
-        return _eig_dense(A, M, k)
+        return (*_eig_dense(A, M, k), None)
+    K = (A - sigma * M).tocsc()
     mdiag = _diagonal(M)
     rng = np.random.default_rng(0)
     start = rng.standard_normal(n) if v0 is None else np.asarray(v0)
     start = start.reshape(n, -1)
-    if mdiag is not None:
-        s = np.sqrt(mdiag).astype(np.finfo(dtype).dtype)[:, None]
+    if mdiag is not None and np.all(mdiag > 0):
+        s = np.sqrt(mdiag).astype(np.finfo(dtype).dtype)
+        d = 1.0 / s
+        K.data *= d[K.indices] * np.repeat(d, np.diff(K.indptr))  # S^-1 K S^-1
+        scaled = factorize(K, "auto", hermitian=True)
+        factor = _ScaledFactor(scaled, s)
         inner = _Inner(dtype)
 
         def op(Y):
-            Z = np.asfortranarray(factor.solve(Y * s))
-            Z *= s
-            return Z
+            return np.asfortranarray(scaled.solve(Y))
 
-        start = start * s
+        start = start * s[:, None]
     else:
+        s = None
+        factor = factorize(K, "auto", hermitian=True)
         inner = _Inner(dtype, mmul=lambda W: np.asfortranarray(M @ W))
 
         def op(Y):
@@ -465,8 +507,8 @@ def _shift_invert_eigsh(A, M, factor, k, *, tol, maxiter, ncv, v0, block_size):
                               ncv=ncv or max(3 * k, 2 * k + 2 * max_block), tol=tol, maxiter=maxiter,
                               v0=start)
     logger.debug("Lanczos: %d solves for k=%d", n_op, k)
-    X = Y / s if mdiag is not None else Y
-    return _rayleigh_ritz(A, M, X)
+    X = Y / s[:, None] if s is not None else Y
+    return (*_rayleigh_ritz(A, M, X), factor)
 
 
 class _Eigsh(torch.autograd.Function):
@@ -484,10 +526,8 @@ class _Eigsh(torch.autograd.Function):
         if method == "dense":
             lam, X = _eig_dense(A, M, k)
         else:
-            K = (A - sigma * M).tocsc()
-            ctx.factor = factorize(K, "auto", hermitian=True)
-            lam, X = _shift_invert_eigsh(A, M, ctx.factor, k, tol=tol, maxiter=maxiter, ncv=ncv,
-                                         v0=v0, block_size=block_size)
+            lam, X, ctx.factor = _shift_invert_eigsh(A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv,
+                                                     v0=v0, block_size=block_size)
         X = _fix_phase(X)
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
         ctx.a_data, ctx.m_data = a_data, m_data
@@ -601,11 +641,17 @@ def eigsh(
         Relative Ritz residual of the shift-inverted operator; default ``1e-12``
         (float64) or ``1e-6`` (float32).
     maxiter, ncv, v0
-        Lanczos restarts, basis size (default ``2k + block_size``), start vector(s).
+        Lanczos restarts, basis size (default ``max(3k, 2k + 2 min(k, 6))``, capped by ``N``;
+        24 for ``k = 1``), start vector(s).
     block_size : int, optional
-        Lanczos block size, default ``min(k, 6)``: eigenvalues of multiplicity up to the
-        block size are all found (symmetric meshes such as icospheres have clusters of
-        up to 5 or 6); blocks also use the faster multi-right-hand-side solves.
+        Fixed Lanczos block size.  Eigenvalues of multiplicity up to the block size are
+        all found.  Default: adaptive, ``min(k, 2)`` growing to ``min(k, 6)`` as soon as
+        two (a block's worth of) converged Ritz values coincide -- the trace that a block
+        Lanczos leaves of a higher multiplicity -- so that the clusters of up to 5 or 6
+        equal eigenvalues of symmetric meshes (icospheres) are found, while meshes
+        without multiple eigenvalues keep the cheaper small block.  ``k = 1`` (without
+        ``block_size``) uses the single-vector fast path (Rayleigh-Ritz accelerated
+        inverse iteration), stopping on the same residual tolerance.
     degeneracy_rtol : float, optional
         Relative gap under which two eigenvalues count as degenerate in the eigenvector
         backward; default ``sqrt(eps)``.
