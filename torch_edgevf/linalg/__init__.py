@@ -7,6 +7,7 @@ to a matrix are returned on its sparsity pattern, through its values.
 from .eigen import EigenPairs, eigsh
 from .expm import expm_multiply, implicit_euler
 from .factor import NotPositiveDefiniteError, SparseSolver, factorize
+from ._utils import sparse_matrix
 from .solve import solve, solve_constrained, solve_fixed
 
 __all__ = [
@@ -20,4 +21,5 @@ __all__ = [
     "solve",
     "solve_constrained",
     "solve_fixed",
+    "sparse_matrix",
 ]
