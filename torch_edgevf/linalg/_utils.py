@@ -266,11 +266,27 @@ def blas_single_thread(fn):
     """
     import functools
 
-    from threadpoolctl import threadpool_limits
-
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        with threadpool_limits(limits=1, user_api="blas"):
+        with _blas_controller().limit(limits=1, user_api="blas"):
             return fn(*args, **kwargs)
 
     return wrapper
+
+
+_CONTROLLER = None
+
+
+def _blas_controller():
+    """One ``threadpoolctl.ThreadpoolController`` for the process.
+
+    ``threadpool_limits`` inspects every loaded shared library on each call (about 1 ms
+    here, as much as a small solve); the controller does it once.  BLAS is loaded with
+    NumPy/SciPy, long before the first call.
+    """
+    global _CONTROLLER
+    if _CONTROLLER is None:
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER = ThreadpoolController()
+    return _CONTROLLER

@@ -339,8 +339,7 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
         w = inner.subtract(w, Vl, c2)
         H[lo: j + 1, j] = (c + c2)[:, 0]
         if good.shape[1]:
-            for _ in range(2):
-                w = inner.subtract(w, good, inner.dot(good, w))
+            w = inner.subtract(w, good, inner.dot(good, w))
         beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
         theta, S = scipy.linalg.eigh((H[: j + 1, : j + 1] + H[: j + 1, : j + 1].conj().T) / 2)
         theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
@@ -357,7 +356,7 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
             good_idx += new  # Ritz pairs are tracked by rank (index 0: the leading pair)
             w = inner.subtract(w, Y, inner.dot(Y, w))
             beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
-        V[:, j + 1: j + 2] = w / beta
+        np.multiply(w, 1.0 / beta, out=V[:, j + 1: j + 2])
         H[j + 1, j] = beta
     # not converged in m steps (or an invariant subspace): the robust general path, from
     # the best Ritz vectors so far
