@@ -311,8 +311,8 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
     Chebyshev-accelerated inverse iteration.  It stops as soon as the Ritz residual of the
     leading pair is below ``tol |theta|``, tested after every solve.
 
-    A step orthogonalizes against the last two vectors only (the three-term recurrence,
-    twice), plus selective orthogonalization (Parlett and Scott) against the Ritz vectors
+    A step orthogonalizes against the last two vectors only (the three-term recurrence),
+    plus selective orthogonalization (Parlett and Scott) against the Ritz vectors
     whose residual fell below ``sqrt(eps) theta_max``: by Paige's theorem the Lanczos
     vectors lose orthogonality only in their direction, so the basis stays semi-orthogonal
     and the Ritz pairs are accurate to working precision, without the full
@@ -335,9 +335,7 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
         Vl = V[:, lo: j + 1]
         c = inner.dot(Vl, w)
         w = inner.subtract(w, Vl, c)
-        c2 = inner.dot(Vl, w)
-        w = inner.subtract(w, Vl, c2)
-        H[lo: j + 1, j] = (c + c2)[:, 0]
+        H[lo: j + 1, j] = c[:, 0]
         if good.shape[1]:
             w = inner.subtract(w, good, inner.dot(good, w))
         beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
