@@ -16,7 +16,15 @@ __all__ = ["Pattern", "EdgePairPattern", "sparse_coo", "diagonal", "unique_pairs
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
-    """A coalesced COO tensor from already sorted, unique ``indices``."""
+    """A coalesced COO tensor from already sorted, unique ``indices``.
+
+    With autograd, the backward to ``values`` reads the gradient on the pattern
+    (:func:`torch_edgevf.linalg.sparse_matrix`) instead of torch's ``sparse_mask``.
+    """
+    if values.requires_grad and torch.is_grad_enabled():
+        from .linalg._utils import _SparseMatrix
+
+        return _SparseMatrix.apply(indices, values, (int(shape[0]), int(shape[1])))
     return torch.sparse_coo_tensor(
         indices, values, tuple(shape), is_coalesced=True, check_invariants=False
     )
