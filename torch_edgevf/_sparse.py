@@ -36,7 +36,23 @@ def diagonal(values: torch.Tensor) -> torch.Tensor:
     return sparse_coo(torch.stack([idx, idx]), values, (values.shape[0], values.shape[0]))
 
 
-class Pattern:
+class _OnDevice:
+    """Index tensors kept on the CPU and copied once to each other device they are used on."""
+
+    def _host(self) -> tuple[torch.Tensor, ...]:
+        raise NotImplementedError
+
+    def _tensors(self, device) -> tuple[torch.Tensor, ...]:
+        device = torch.device(device)
+        if device.type == "cpu":
+            return self._host()
+        cache = self.__dict__.setdefault("_on_device", {})
+        if device not in cache:
+            cache[device] = tuple(t.to(device) for t in self._host())
+        return cache[device]
+
+
+class Pattern(_OnDevice):
     """The coalesced sparsity pattern of a sum of contributions.
 
     Parameters
@@ -64,16 +80,9 @@ class Pattern:
         self._first = torch.from_numpy(first.astype(index))
         self._rest_src = torch.from_numpy(np.flatnonzero(rest).astype(index))
         self._rest_dst = torch.from_numpy(target[rest].astype(index))
-        self._on_device: dict = {}
 
-    def _tensors(self, device) -> tuple[torch.Tensor, ...]:
-        device = torch.device(device)
-        host = (self._indices, self._first, self._rest_src, self._rest_dst)
-        if device.type == "cpu":
-            return host
-        if device not in self._on_device:
-            self._on_device[device] = tuple(t.to(device) for t in host)
-        return self._on_device[device]
+    def _host(self) -> tuple[torch.Tensor, ...]:
+        return (self._indices, self._first, self._rest_src, self._rest_dst)
 
     @property
     def indices(self) -> torch.Tensor:
@@ -132,7 +141,7 @@ _PREV = np.array([2, 0, 1])
 _SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
 
 
-class EdgePairPattern:
+class EdgePairPattern(_OnDevice):
     """The ``(E, E)`` pattern of operators coupling the edges of each face, filled by gathers.
 
     Row ``e`` holds the diagonal and the two other edges of each face of ``e``; on a
@@ -189,21 +198,14 @@ class EdgePairPattern:
         # diagonal: the (corner, face) of each side of every edge in the flat (3F,) layout, 3F if none
         diag_src = np.where(ef >= 0, ec * nf + ef, 3 * nf).T
         self._diag = tuple(torch.from_numpy(np.ascontiguousarray(d).astype(index)) for d in diag_src)
-        self._on_device: dict = {}
 
     @property
     def indices(self) -> torch.Tensor:
         """(2, nnz) int64 row and column indices, sorted lexicographically."""
         return self._indices
 
-    def _tensors(self, device):
-        device = torch.device(device)
-        host = (self._indices, self._gather) + self._diag
-        if device.type == "cpu":
-            return host
-        if device not in self._on_device:
-            self._on_device[device] = tuple(t.to(device) for t in host)
-        return self._on_device[device]
+    def _host(self) -> tuple[torch.Tensor, ...]:
+        return (self._indices, self._gather) + self._diag
 
     def assemble(self, diag: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor) -> torch.Tensor:
         """Sparse COO from corner-major ``(3, F)`` diagonal, upper and lower face terms."""
