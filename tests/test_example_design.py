@@ -1,23 +1,14 @@
 """The design example runs and its output makes sense (examples are tests)."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import torch
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "design_spot.py"
-
-
-def _load_example():
-    spec = importlib.util.spec_from_file_location("design_spot", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_example
 
 
 def test_design_spot_example(tmp_path):
-    result = _load_example().main(out_dir=tmp_path)
+    result = load_example("design_spot").main(out_dir=tmp_path)
     data = np.load(result["path"])
     nf, ne = data["faces"].shape[0], data["edges"].shape[0]
     for name in ("smoothest", "curvature"):

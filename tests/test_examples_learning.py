@@ -1,21 +1,11 @@
 """The learning examples run at a small size and give their numbers."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from torch_edgevf import data
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_example as load
 
 
 def test_isospectralization_reduces_the_spectral_loss():

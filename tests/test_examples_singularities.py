@@ -1,20 +1,8 @@
 """The singularity, parametrization and transport examples run and give their numbers."""
 
-import importlib.util
-from pathlib import Path
-
-import pytest
-
 import torch_edgevf as ev
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from conftest import load_example as load
 
 
 def test_singularities_spot():
