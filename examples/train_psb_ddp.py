@@ -5,8 +5,13 @@ port) each train a replica of :class:`~torch_edgevf.models.EdgeFieldNet` on thei
 of the training set (``DistributedSampler``); DDP averages the gradients, so the replicas
 stay identical. The operators come from the shared on-disk cache, which the parent
 process fills first (entries are written atomically, so concurrent readers are safe).
-Rank 0 evaluates on the test set. Processes are forked (Linux), so the example also runs
-when this file was loaded by path (as the tests do).
+Rank 0 evaluates on the test set.
+
+The workers are started with the ``spawn`` method: a fresh interpreter per rank. Forking
+after the parent has started torch's OpenMP threads (it has, once the operator cache is
+filled) can deadlock the child, and did hang the two-process test. Each child runs this
+file by path (see :func:`_spawn_workers`), so the example works both as a script and
+loaded by path, as the tests load it.
 Run ``python examples/train_psb_ddp.py``.
 """
 
@@ -23,7 +28,6 @@ from pathlib import Path
 
 import torch
 import torch.distributed as dist
-import torch.multiprocessing as mp
 from torch.nn.parallel import DistributedDataParallel
 
 from torch_edgevf import data
@@ -43,6 +47,37 @@ def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def _spawn_workers(world_size: int, args: tuple) -> None:
+    """Run ``_worker(rank, *args)`` in ``world_size`` fresh interpreters and wait for them.
+
+    ``spawn`` pickles the target by reference, and this file is a script, not an
+    importable module (the tests load it by path).  The target is therefore
+    :func:`runpy.run_path` on this file under the name ``__ddp_worker__``, which calls
+    :func:`_worker` at the end of the file, whichever way the parent loaded it.
+    """
+    import multiprocessing
+    import runpy
+
+    ctx = multiprocessing.get_context("spawn")
+    procs = [ctx.Process(target=runpy.run_path, args=(str(Path(__file__).resolve()),),
+                         kwargs=dict(init_globals={"_WORKER_ARGS": (rank, world_size) + args},
+                                     run_name="__ddp_worker__"))
+             for rank in range(world_size)]
+    for proc in procs:
+        proc.start()
+    try:
+        for proc in procs:
+            proc.join()
+    finally:
+        for proc in procs:
+            if proc.is_alive():  # another rank failed and this one waits on it in a collective
+                proc.terminate()
+                proc.join()
+    failed = {rank: proc.exitcode for rank, proc in enumerate(procs) if proc.exitcode != 0}
+    if failed:
+        raise RuntimeError(f"DDP workers failed (rank: exit code): {failed}")
 
 
 def _worker(rank: int, world_size: int, port: int, cfg: dict, out_path: str) -> None:
@@ -102,10 +137,12 @@ def main(world_size: int = 2, epochs: int = 2, max_steps: int | None = None, mod
                cache_dir=cache_dir, seed=seed)
     with tempfile.TemporaryDirectory() as tmp:
         out_path = os.path.join(tmp, "result.json")
-        mp.start_processes(_worker, args=(world_size, free_port(), cfg, out_path), nprocs=world_size,
-                           join=True, start_method="fork")
+        _spawn_workers(world_size, (free_port(), cfg, out_path))
         return json.loads(Path(out_path).read_text())
 
+
+if __name__ == "__ddp_worker__":  # a spawned rank (see _spawn_workers)
+    _worker(*_WORKER_ARGS)  # noqa: F821 (set by runpy.run_path)
 
 if __name__ == "__main__":
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")

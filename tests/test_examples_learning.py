@@ -44,13 +44,11 @@ def test_train_psb_small(tmp_path):
     assert out["table"].count("\n") == 3 and "| edge |" in out["table"] and "| diffusionnet |" in out["table"]
 
 
-@pytest.mark.slow
 def test_train_psb_ddp_two_processes(tmp_path):
-    """Two gloo processes on 127.0.0.1, two steps.
+    """Two gloo processes on 127.0.0.1, two steps (about 5 s).
 
-    Marked slow (out of the default run) because it hung twice on 2026-11-23: the example
-    forks its workers after the parent has started OpenMP threads, which can deadlock the
-    child. Moving the example to the spawn start method is the fix still to make.
+    The example starts its workers with ``spawn``: with ``fork`` (after the parent had
+    started OpenMP threads) this test hung twice on 2026-11-23 and was marked slow.
     """
     ids = _psb_subset()
     out = load("train_psb_ddp").main(world_size=2, max_steps=2, width=4, num_blocks=1, batch_size=1, ids=ids,
