@@ -9,6 +9,8 @@ tensor, with no sort, and autograd flows through it.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import torch
 
@@ -102,33 +104,40 @@ class Pattern(_OnDevice):
         return sparse_coo(indices, out, self.shape)
 
 
-def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None,
+                 index_dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
     """Sorted unique keys ``lo * nv + hi`` of integer pairs and the index of each pair's key.
 
-    ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``).
+    ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``). The keys are int64; the
+    indices have ``index_dtype``.
 
     When they fit, the key and the pair's position are packed into one int64 so that
-    a plain sort (about 3x faster than an argsort) gives both the order and the keys.
+    a plain in-place sort (about 3x faster than an argsort) gives both the order and the keys.
     """
-    keys = np.asarray(lo, dtype=np.int64) * nv + np.asarray(hi, dtype=np.int64)
+    keys = np.asarray(lo).astype(np.int64)  # a copy: worked on in place below
+    keys *= nv
+    keys += np.asarray(hi)
     n = keys.shape[0]
     if n == 0:
-        return keys, np.zeros(0, dtype=np.int64)
+        return keys, np.zeros(0, dtype=index_dtype)
     shift = max(int(n - 1).bit_length(), 1)
     if (nv if num_lo is None else num_lo) * nv <= 2 ** (63 - shift):
-        packed = np.sort((keys << shift) | np.arange(n))
-        order = packed & ((1 << shift) - 1)
-        sorted_keys = packed >> shift
+        keys <<= shift
+        keys |= np.arange(n, dtype=np.int64)
+        keys.sort()
+        order = keys & ((1 << shift) - 1)
+        keys >>= shift
     else:
         order = np.argsort(keys)
-        sorted_keys = keys[order]
+        keys = keys[order]
     new = np.empty(n, dtype=bool)
     new[0] = True
-    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=new[1:])
-    starts = np.flatnonzero(new)
-    inverse = np.empty(n, dtype=np.int64)
-    inverse[order] = np.repeat(np.arange(starts.shape[0]), np.diff(starts, append=n))
-    return sorted_keys[starts], inverse
+    np.not_equal(keys[1:], keys[:-1], out=new[1:])
+    ids = np.cumsum(new, dtype=index_dtype)
+    ids -= 1
+    inverse = np.empty(n, dtype=index_dtype)
+    inverse[order] = ids
+    return keys[new], inverse
 
 
 def _index_dtype(size: int):
@@ -136,68 +145,83 @@ def _index_dtype(size: int):
     return np.int32 if size < 2**31 - 1 else np.int64
 
 
-_NEXT = np.array([1, 2, 0])
-_PREV = np.array([2, 0, 1])
-_SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
-
-
 class EdgePairPattern(_OnDevice):
     """The ``(E, E)`` pattern of operators coupling the edges of each face, filled by gathers.
 
     Row ``e`` holds the diagonal and the two other edges of each face of ``e``; on a
     manifold mesh every off-diagonal nonzero comes from exactly one face. Values are given
-    corner-major, as ``(3, F)`` tensors: ``diag[k, f]`` at the edge opposite corner ``k``
-    (summed over the faces of the edge), ``upper[j, f]`` at (edge opposite corner ``j``,
-    edge opposite corner ``j + 1``) and ``lower[j, f]`` at the transposed position.
+    face-major, as ``(F, 3)`` tensors: ``diag[f, k]`` at the edge opposite corner ``k``
+    (summed over the faces of the edge), ``upper[f, k]`` at (edge opposite corner ``k``,
+    edge opposite corner ``k + 1``) and ``lower[f, k]`` at the transposed position.
     Assembly is two gathers for the diagonal and one into sorted COO order: no scatter,
     no sort.
 
     Parameters
     ----------
     face_edges : (F, 3) int array
-    edge_faces, edge_corners : (E, 2) int arrays, -1 where there is no face
+    side_corners : (E, 2) int array
+        The corner ``3 f + k`` opposite each side of every edge (see
+        :attr:`Topology.edge_faces`), ``-1`` where there is no face.
     """
 
-    def __init__(self, face_edges, edge_faces, edge_corners):
-        fe = np.asarray(face_edges, dtype=np.int64)
-        ef = np.asarray(edge_faces, dtype=np.int64)
-        ec = np.asarray(edge_corners, dtype=np.int64)
-        ne, nf = ef.shape[0], fe.shape[0]
+    def __init__(self, face_edges, side_corners):
+        flat_fe = np.ascontiguousarray(face_edges).ravel()
+        sc = np.asarray(side_corners)
+        ne, nf = sc.shape[0], flat_fe.shape[0] // 3
         if ne + 6 * nf >= 2**32:
             raise ValueError(f"mesh too large for EdgePairPattern: {ne} edges and {nf} faces")
         self.shape = (ne, ne)
-        index = _index_dtype(ne + 6 * nf)
-        closed = bool((ef >= 0).all())
-        flat_fe = fe.ravel()
-        # slot s of row e holds column cols[s][e], whose value comes from src[s][e]
-        cols, src = [np.arange(ne)], [np.arange(ne)]
+        self._num_faces = nf
+        self._closed = closed = bool((sc >= 0).all())
+        i64 = np.int64
+        # The sort keys (column << 32 | source) of row e live in the (E, 5) view of the
+        # column half of the output indices; sorted in place, then shifted into columns.
+        indices = np.empty((2, 5 * ne), dtype=i64)
+        keys = indices[1].reshape(ne, 5)
+        np.multiply(np.arange(ne, dtype=i64), (1 << 32) | 1, out=keys[:, 0])  # diagonal: (e, e)
+        nxt = np.empty(ne, dtype=i64)
+        prv = np.empty(ne, dtype=i64)
         for side in (0, 1):
-            g, k = ef[:, side], ec[:, side]
-            nxt, prv = _NEXT[k], _PREV[k]
-            # (k, k+1) is upper[k, g]; (k, k+2) is the transpose of upper[k+2, g]
-            cols += [flat_fe[3 * g + nxt], flat_fe[3 * g + prv]]
-            src += [ne + k * nf + g, ne + 3 * nf + prv * nf + g]
+            c = sc[:, side]
+            r = c % 3  # c - r is 3 f, the first corner of the face
+            # corners k + 1 and k + 2 (mod 3) of the same face
+            np.add(c, np.where(r == 2, -2, 1), out=nxt, dtype=i64)
+            np.add(c, np.where(r == 0, 2, -1), out=prv, dtype=i64)
             if not closed:
-                missing = g < 0
-                cols[-1][missing] = cols[-2][missing] = ne  # the sentinel ne sorts last
-                src[-1][missing] = src[-2][missing] = 0
-        # sort each row by column: a 9-comparator sorting network on keys (column << 32) | source
-        keys = [(c << 32) | s for c, s in zip(cols, src)]
-        for i, j in _SORT5:
-            keys[i], keys[j] = np.minimum(keys[i], keys[j]), np.maximum(keys[i], keys[j])
-        keys = np.stack(keys, axis=1).ravel()  # row-major (E, 5) = COO order
-        cols = keys >> 32
-        src = keys & 0xFFFFFFFF
-        rows = np.repeat(np.arange(ne), 5)
+                missing = c < 0
+                nxt[missing] = prv[missing] = 0
+            # (e_k, e_k+1) is upper[f, k], source ne + c; (e_k, e_k+2) is lower[f, k+2]
+            col = keys[:, 1 + 2 * side]
+            np.left_shift(flat_fe[nxt], 32, out=col, dtype=i64)
+            np.bitwise_or(col, c, out=col, dtype=i64)
+            col += ne  # no carry: sources are below 2**32
+            col = keys[:, 2 + 2 * side]
+            np.left_shift(flat_fe[prv], 32, out=col, dtype=i64)
+            col |= prv
+            col += ne + 3 * nf
+            if not closed:
+                keys[missing, 1 + 2 * side] = keys[missing, 2 + 2 * side] = ne << 32  # sorts last
+        del nxt, prv
+        keys.sort(axis=1)
+        index = _index_dtype(ne + 6 * nf)
+        if sys.byteorder == "little":  # the low halves of the keys, without a temporary
+            gather = keys.view(np.uint32)[:, 0::2].astype(index)
+        else:
+            gather = (keys & 0xFFFFFFFF).astype(index)
+        keys >>= 32
+        indices[0].reshape(ne, 5)[:] = np.arange(ne)[:, None]
         if not closed:
-            valid = cols < ne
-            rows, cols, src = rows[valid], cols[valid], src[valid]
-        self.nnz = int(rows.shape[0])
-        self._indices = torch.from_numpy(np.stack([rows, cols]))
-        self._gather = torch.from_numpy(src.astype(index))
-        # diagonal: the (corner, face) of each side of every edge in the flat (3F,) layout, 3F if none
-        diag_src = np.where(ef >= 0, ec * nf + ef, 3 * nf).T
-        self._diag = tuple(torch.from_numpy(np.ascontiguousarray(d).astype(index)) for d in diag_src)
+            valid = indices[1] < ne
+            indices, gather = indices[:, valid], gather.ravel()[valid]
+        self.nnz = int(indices.shape[1])
+        self._indices = torch.from_numpy(indices)
+        self._gather = torch.from_numpy(gather.ravel())
+        # diagonal: the face-major corner of each side of every edge, 3F (a zero) if none
+        diag_src = sc if closed else np.where(sc >= 0, sc, 3 * nf)
+        self._diag = tuple(
+            torch.from_numpy(np.ascontiguousarray(diag_src[:, side]).astype(_index_dtype(3 * nf + 1), copy=False))
+            for side in (0, 1)
+        )
 
     @property
     def indices(self) -> torch.Tensor:
@@ -207,17 +231,38 @@ class EdgePairPattern(_OnDevice):
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, self._gather) + self._diag
 
-    def assemble(self, diag: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor) -> torch.Tensor:
-        """Sparse COO from corner-major ``(3, F)`` diagonal, upper and lower face terms."""
+    def assemble(self, diag: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor | None = None) -> torch.Tensor:
+        """Sparse COO from face-major ``(F, 3)`` diagonal, upper and lower face terms.
+
+        ``lower=None`` means ``upper.conj()`` (a Hermitian operator; ``upper`` for real ones).
+        """
         indices, gather, side0, side1 = self._tensors(upper.device)
-        dtype = torch.promote_types(torch.promote_types(diag.dtype, upper.dtype), lower.dtype)
-        flat = torch.cat([diag.reshape(-1), diag.new_zeros(1)]).to(dtype)
+        ne, nf = self.shape[0], self._num_faces
+        lower_dtype = upper.dtype if lower is None else lower.dtype
+        dtype = torch.promote_types(torch.promote_types(diag.dtype, upper.dtype), lower_dtype)
+        flat = diag.reshape(-1)
+        if not self._closed:
+            flat = torch.cat([flat, flat.new_zeros(1)])
         on_diag = flat.index_select(0, side0) + flat.index_select(0, side1)
-        values = torch.cat([on_diag, upper.reshape(-1).to(dtype), lower.reshape(-1).to(dtype)])
+        if torch.is_grad_enabled() and any(
+            t is not None and t.requires_grad for t in (diag, upper, lower)
+        ):
+            low = upper.conj() if lower is None else lower
+            values = torch.cat([on_diag.to(dtype), upper.reshape(-1).to(dtype), low.reshape(-1).to(dtype)])
+        else:  # one buffer, filled in place (no concatenation, no materialised conjugate)
+            values = torch.empty(ne + 6 * nf, dtype=dtype, device=upper.device)
+            values[:ne] = on_diag
+            values[ne:ne + 3 * nf] = upper.reshape(-1)
+            if lower is not None:
+                values[ne + 3 * nf:] = lower.reshape(-1)
+            elif dtype.is_complex:
+                torch.conj_physical(values[ne:ne + 3 * nf], out=values[ne + 3 * nf:])
+            else:
+                values[ne + 3 * nf:] = values[ne:ne + 3 * nf]
         return sparse_coo(indices, values.index_select(0, gather), self.shape)
 
     def assemble_pairs(self, values: torch.Tensor) -> torch.Tensor:
         """Sparse COO from ``(F, 9)`` per-face values of the ordered corner pairs (row-major ``3a + b``)."""
-        v = values.reshape(-1, 3, 3).permute(1, 2, 0)  # (a, b, F)
-        k = [0, 1, 2]
-        return self.assemble(v[k, k], v[k, [1, 2, 0]], v[[1, 2, 0], k])
+        v = values.reshape(-1, 9)
+        # diag (k, k); upper (k, k+1); lower (k+1, k)
+        return self.assemble(v[:, [0, 4, 8]], v[:, [1, 5, 6]], v[:, [3, 7, 2]])

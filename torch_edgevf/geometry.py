@@ -130,7 +130,7 @@ def face_geometry(verts, faces) -> FaceGeometry:
         On NaN/Inf coordinates or zero-area faces, naming them.
     """
     topo = faces if isinstance(faces, Topology) else None
-    faces = faces.faces if topo is not None else as_faces(faces)
+    faces = None if topo is not None else as_faces(faces)
     verts = as_verts(verts)
     # Without autograd, the last geometry of a topology is reused for equal positions
     # (compared by value, so in-place edits of any kind are seen).
@@ -139,16 +139,19 @@ def face_geometry(verts, faces) -> FaceGeometry:
         cached = topo._cache.get("geometry")
         if cached is not None and _same_values(cached[0], verts):
             return cached[1]
-    faces = faces.to(verts.device)
-    out_of_range = (faces < 0) | (faces >= verts.shape[0])
-    if out_of_range.any():
-        bad = torch.nonzero(out_of_range.any(dim=1)).flatten().tolist()
-        raise ValueError(
-            f"faces has vertex indices outside [0, {verts.shape[0]}) in faces [{list_some(bad)}]"
-        )
+    if topo is not None and verts.shape[0] >= topo.num_vertices:
+        ft = topo.corner_vertices().to(verts.device)  # indices checked when the topology was built
+    else:
+        faces = (topo.faces if topo is not None else faces).to(verts.device)
+        out_of_range = (faces < 0) | (faces >= verts.shape[0])
+        if out_of_range.any():
+            bad = torch.nonzero(out_of_range.any(dim=1)).flatten().tolist()
+            raise ValueError(
+                f"faces has vertex indices outside [0, {verts.shape[0]}) in faces [{list_some(bad)}]"
+            )
+        ft = faces.t().contiguous()
     # Everything below is an (F,) vector: many small 1-D operations beat (F, 3, 3) temporaries.
     coords = verts.t().contiguous()
-    ft = faces.t().contiguous()
     p = [[coords[x].index_select(0, ft[k]) for k in range(3)] for x in range(3)]  # p[x][corner]
     # e[x][k]: coordinate x of the edge opposite corner k, running from corner k+1 to k+2
     e = [[p[x][(k + 2) % 3] - p[x][(k + 1) % 3] for k in range(3)] for x in range(3)]

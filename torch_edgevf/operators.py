@@ -69,11 +69,10 @@ def _pattern(topo: Topology, name: str) -> Pattern:
     """The cached sparsity pattern ``name`` of ``topo`` (built on first use)."""
 
     def build():
-        f = topo.faces.numpy()
-        fe = topo.face_edges.numpy()
+        f, fe = topo._faces, topo._face_edges  # int32 where the mesh allows
         ne, nv, nf = topo.num_edges, topo.num_vertices, topo.num_faces
         if name == "EE":
-            return EdgePairPattern(fe, topo.edge_faces.numpy(), topo.edge_corners.numpy())
+            return EdgePairPattern(fe, topo.side_corners())
         if name == "EV":  # pair-major: contribution p F + f, for the corner pair p = 3a + b of face f
             return Pattern(fe[:, _A].T, f[:, _B].T, (ne, nv))
         if name == "VV":
@@ -194,9 +193,13 @@ def _edge_field(z, topo: Topology, like: torch.Tensor, name: str = "z") -> torch
 
 
 def _mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
-    fe = topo.face_edges.to(geom.area.device)
-    third = (geom.area / 3)[:, None].expand(-1, 3)
-    return geom.area.new_zeros(topo.num_edges).index_add(0, fe.flatten(), third.flatten())
+    """``(M_z)_ee = sum A / 3`` over the (one or two) faces of each edge: two gathers."""
+    third = geom.area / 3
+    if topo.is_closed:
+        sides = topo.edge_faces_t().to(third.device)
+        return third.index_select(0, sides[0]) + third.index_select(0, sides[1])
+    fe = torch.from_numpy(topo._face_edges).to(third.device)
+    return third.new_zeros(topo.num_edges).index_add(0, fe.flatten(), third[:, None].expand(-1, 3).flatten())
 
 
 def _connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: Topology, n: int) -> torch.Tensor:
@@ -209,21 +212,19 @@ def _connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: To
     a2 = geom.double_area
     lt, dt = geom.lengths.t(), geom.dots.t()  # (3, F)
     inv_a2 = 1 / a2
-    diag = torch.stack([2 * lt[k] * lt[k] * inv_a2 for k in range(3)])
+    diag = torch.stack([2 * lt[k] * lt[k] * inv_a2 for k in range(3)], dim=1)
     dc = [dt[(j + 2) % 3] for j in range(3)]
     weight = [-2 * dc[j] * inv_a2 for j in range(3)]
     pattern = _pattern(topo, "EE")
     if n == 0:
-        w = torch.stack(weight)
-        return pattern.assemble(diag, w, w)
+        return pattern.assemble(diag, torch.stack(weight, dim=1))
     upper = []
     st = signs.t()
     for j in range(3):
         inv_lab = 1 / (lt[j] * lt[(j + 1) % 3])
         w = weight[j] if n % 2 == 0 else weight[j] * (-st[j] * st[(j + 1) % 3])
         upper.append(w * _int_power(torch.complex(dc[j] * inv_lab, -a2 * inv_lab), n))
-    upper = torch.stack(upper)
-    return pattern.assemble(diag, upper, upper.conj())
+    return pattern.assemble(diag, torch.stack(upper, dim=1))  # lower = conj(upper): Hermitian
 
 
 def _gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:

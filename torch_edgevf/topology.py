@@ -20,6 +20,8 @@ characteristic. Use :func:`remove_unreferenced_vertices` to drop them.
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import scipy.sparse as sp
 import torch
@@ -73,63 +75,108 @@ class Topology:
         f = faces.detach().cpu().numpy()
         nf = f.shape[0]
         nv = _check_indices(f, num_vertices)
+        # int32 work arrays where every index fits (half the memory traffic of int64)
+        it = np.int32 if max(nv, 6 * nf + 2) < 2**31 - 1 else np.int64
+        fi = f.astype(it)
 
-        src, dst = f[:, _NEXT], f[:, _PREV]  # the half-edge opposite each corner
-        positive = src < dst
-        lo, hi = np.minimum(src, dst).ravel(), np.maximum(src, dst).ravel()
-        keys, face_edges = unique_pairs(lo, hi, nv)
-        face_edges = face_edges.reshape(nf, 3)
-        signs = np.where(positive, 1, -1)
+        src, dst = fi[:, _NEXT], fi[:, _PREV]  # the half-edge opposite each corner
+        negative = src > dst  # runs from the higher to the lower index: side 1
+        keys, face_edges = unique_pairs(np.minimum(src, dst).ravel(), np.maximum(src, dst).ravel(), nv,
+                                        index_dtype=it)
+        del src, dst
         ne = keys.shape[0]
-        edges = np.empty((ne, 2), dtype=np.int64)
-        np.floor_divide(keys, nv, out=edges[:, 0])
-        np.subtract(keys, edges[:, 0] * nv, out=edges[:, 1])
 
-        counts = np.bincount(face_edges.ravel(), minlength=ne)
-        if counts.max() > 2:
+        # the side (2 e + 1 for a high-to-low run) of the edge opposite each corner
+        corner_side = face_edges * 2
+        corner_side += negative.ravel()
+        sided = np.bincount(corner_side, minlength=2 * ne)
+        if sided.max() > 1:  # a side used twice: a duplicate, a non-manifold edge or a flipped face
             _check_duplicate_faces(f)  # the clearer message when that is the cause
-            _check_manifold_edges(edges, face_edges, counts)
-        slot = (~positive).ravel().astype(np.int64)
-        sided = np.bincount(face_edges.ravel() * 2 + slot, minlength=2 * ne)
-        if sided.max() > 1:
-            _check_duplicate_faces(f)
-            _check_orientation(edges, face_edges, sided)
+            edges = _edges_of(keys, nv)
+            counts = sided[0::2] + sided[1::2]
+            if counts.max() > 2:
+                _check_manifold_edges(edges, face_edges.reshape(nf, 3), counts)
+            _check_orientation(edges, face_edges.reshape(nf, 3), sided)
+        del sided
 
-        # each side of every edge: (face, corner opposite the edge), -1 if there is none
-        corner_side = 2 * face_edges.ravel() + slot
-        side_corner = np.full(2 * ne, -1, dtype=np.int64)
-        side_corner[corner_side] = np.arange(3 * nf)
-        has_face = side_corner >= 0
-        face_of_side = side_corner // 3
-        edge_faces = np.where(has_face, face_of_side, -1).reshape(ne, 2)
-        edge_corners = np.where(has_face, side_corner - 3 * face_of_side, -1).reshape(ne, 2)
-        # the same vertex opposite both sides of an edge: a duplicated pair of faces
-        opposite = f.ravel()[side_corner].reshape(ne, 2)
-        if (has_face.reshape(ne, 2).all(axis=1) & (opposite[:, 0] == opposite[:, 1])).any():
-            _check_duplicate_faces(f)
-        _check_manifold_vertices(f, nv, side_corner, corner_side)
+        # each side of every edge: the corner 3 f + k opposite the edge, -1 if there is none
+        side_corner = np.full(2 * ne, -1, dtype=it)
+        side_corner[corner_side] = np.arange(3 * nf, dtype=it)
+        _check_manifold_vertices(fi, nv, side_corner, corner_side)
+        del corner_side
 
-        boundary_edges = counts == 1
+        boundary_edges = side_corner[0::2] < 0
+        boundary_edges |= side_corner[1::2] < 0
         boundary_vertices = np.zeros(nv, dtype=bool)
-        boundary_vertices[edges[boundary_edges].ravel()] = True
+        boundary_vertices[_edges_of(keys[boundary_edges], nv).ravel()] = True
         referenced = np.zeros(nv, dtype=bool)
-        referenced[f.ravel()] = True
+        referenced[fi.ravel()] = True
 
         self.num_vertices = int(nv)
         self.num_edges = int(ne)
         self.num_faces = int(nf)
-        self.faces = torch.from_numpy(f.astype(np.int64, copy=True))
-        self.edges = torch.from_numpy(edges)
-        self.face_edges = torch.from_numpy(face_edges.astype(np.int64, copy=False))
-        self.face_edge_signs = torch.from_numpy(signs.astype(np.int64, copy=False))
-        self.edge_faces = torch.from_numpy(edge_faces)
-        self.edge_corners = torch.from_numpy(edge_corners)
+        # Compact working arrays (int32 where they fit); the int64 tensors of the public
+        # attributes are made from them on first use.
+        self._faces = fi  # a copy: later edits of the caller's faces are not seen
+        self._edge_keys = keys
+        self._face_edges = face_edges.reshape(nf, 3)
+        self._negative = negative
+        self._side_corners = side_corner.reshape(ne, 2)
         self.boundary_edges = torch.from_numpy(boundary_edges)
         self.boundary_vertices = torch.from_numpy(boundary_vertices)
         self.unreferenced_vertices = torch.from_numpy(np.flatnonzero(~referenced))
         self.euler_characteristic = int(referenced.sum()) - int(ne) + int(nf)
         self._referenced = referenced
         self._cache: dict = {}
+
+    # The int64 index tensors, made on first use (a first assembly of L_c needs none of them).
+
+    @cached_property
+    def faces(self) -> torch.Tensor:
+        """(F, 3) int64 tensor: the counter-clockwise triangles (a copy of the input)."""
+        return torch.from_numpy(self._faces.astype(np.int64))
+
+    @cached_property
+    def edges(self) -> torch.Tensor:
+        """(E, 2) int64 tensor, ``edges[:, 0] < edges[:, 1]``, lexicographically sorted."""
+        return torch.from_numpy(_edges_of(self._edge_keys, self.num_vertices))
+
+    @cached_property
+    def face_edges(self) -> torch.Tensor:
+        """(F, 3) int64 tensor: the edge opposite each corner."""
+        return torch.from_numpy(self._face_edges.astype(np.int64))
+
+    @cached_property
+    def face_edge_signs(self) -> torch.Tensor:
+        """(F, 3) int64 tensor of +-1: the sign delta of the edge opposite each corner."""
+        return torch.from_numpy(1 - 2 * self._negative.astype(np.int64))
+
+    @cached_property
+    def edge_faces(self) -> torch.Tensor:
+        """(E, 2) int64 tensor: the face on each side of every edge, -1 if none (module docstring)."""
+        return torch.from_numpy(self._side_corners // 3).to(torch.int64)  # -1 // 3 == -1
+
+    @cached_property
+    def edge_corners(self) -> torch.Tensor:
+        """(E, 2) int64 tensor: the corner of ``edge_faces`` opposite the edge, -1 if none."""
+        sc = self._side_corners
+        return torch.from_numpy(np.where(sc >= 0, sc % 3, -1).astype(np.int64))
+
+    def side_corners(self) -> np.ndarray:
+        """(E, 2) int array: the corner ``3 f + k`` opposite each side of every edge, -1 if none.
+
+        Side 0 is the face of ``edge_faces[:, 0]``, side 1 that of ``edge_faces[:, 1]``.
+        int32 where the mesh allows, else int64; do not modify.
+        """
+        return self._side_corners
+
+    def edge_faces_t(self) -> torch.Tensor:
+        """(2, E) contiguous index tensor: ``edge_faces.t()``, int32 where the mesh allows (cached)."""
+        return self.cached("edge_faces_t", lambda: torch.from_numpy(np.ascontiguousarray(self._side_corners.T // 3)))
+
+    def corner_vertices(self) -> torch.Tensor:
+        """(3, F) contiguous index tensor: ``faces.t()``, int32 where the mesh allows (cached)."""
+        return self.cached("corner_vertices", lambda: torch.from_numpy(np.ascontiguousarray(self._faces.T)))
 
     @property
     def components(self) -> torch.Tensor:
@@ -214,6 +261,14 @@ def remove_unreferenced_vertices(verts: torch.Tensor, faces) -> tuple[torch.Tens
     return verts[kept.to(verts.device)], new_index[faces], kept
 
 
+def _edges_of(keys: np.ndarray, nv: int) -> np.ndarray:
+    """(K, 2) int64 vertex pairs ``(i, j)`` of edge keys ``i * nv + j``."""
+    edges = np.empty((keys.shape[0], 2), dtype=np.int64)
+    np.floor_divide(keys, nv, out=edges[:, 0])
+    np.subtract(keys, edges[:, 0] * nv, out=edges[:, 1])
+    return edges
+
+
 def _check_indices(f: np.ndarray, num_vertices: int | None) -> int:
     nv = int(f.max()) + 1 if num_vertices is None else int(num_vertices)
     repeated = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
@@ -235,7 +290,7 @@ def _check_indices(f: np.ndarray, num_vertices: int | None) -> int:
 
 
 def _check_duplicate_faces(f: np.ndarray) -> None:
-    key = np.sort(f, axis=1)
+    key = np.sort(f, axis=1).astype(np.int64, copy=False)
     n = int(key.max()) + 1
     if n < 2**21:  # fast path: one int64 key per face
         packed = np.sort((key[:, 0] * n + key[:, 1]) * n + key[:, 2])
@@ -291,45 +346,62 @@ def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
     corners reached: a single fan reaches all of them. Each step advances every vertex that
     is still walking, so the loop runs at most (largest valence) times on shrinking arrays;
     the pairing is injective here (manifold edges, consistent orientation checked before).
+
+    A closed fan of two faces means both faces have the same three vertices: a duplicated
+    face (with flipped orientation, the other case is caught as an orientation error).
     """
+    it = side_corner.dtype
     nc = 3 * f.shape[0]
-    # corner k+2 of the same face; the edge opposite it leaves the vertex of corner k
-    third = np.arange(nc).reshape(-1, 3)[:, _PREV].ravel()
-    across = side_corner[corner_side[third] ^ 1]  # the corner across that edge, or -1
-    nxt = np.where(across >= 0, third[across], -1)
-    has_next = nxt >= 0
-    prv = np.full(nc, -1, dtype=np.int64)
-    prv[nxt[has_next]] = np.flatnonzero(has_next)
+    # the corner across the edge opposite each corner (-1 on the boundary) ...
+    across = side_corner[corner_side ^ 1]
+    # ... read at corner k + 2; the edge opposite it leaves the vertex of corner k. Across
+    # it, the same vertex sits at the corner before the one opposite the edge.
+    nxt = across.reshape(-1, 3)[:, _PREV].ravel()
+    del across
+    walled = nxt < 0
+    nxt += np.where(nxt % 3 == 0, 2, -1).astype(it)
+    nxt[walled] = -1
     vertex = f.ravel()
     count = np.bincount(vertex, minlength=nv)
-    start = np.full(nv, -1, dtype=np.int64)
-    start[vertex] = np.arange(nc)  # one corner per referenced vertex
+    start = np.full(nv, -1, dtype=it)
+    start[vertex] = np.arange(nc, dtype=it)  # one corner per referenced vertex
     vs = np.flatnonzero(start >= 0)
     c0 = start[vs]
-    reached = np.ones(vs.shape[0], dtype=np.int64)
+    reached = np.ones(vs.shape[0], dtype=it)
     limit = int(count.max())
     # forward; the walks that fall off a boundary (chains) then walk backward from c0
-    idx, cur = np.arange(vs.shape[0]), nxt[c0]
+    idx, cur = np.arange(vs.shape[0], dtype=it), nxt[c0]
     chains = []
     for _ in range(limit):
-        chains.append(idx[cur < 0])
-        alive = (cur >= 0) & (cur != c0[idx])
+        ended = cur < 0
+        if ended.any():
+            chains.append(idx[ended])
+        alive = ~ended & (cur != c0[idx])
         idx, cur = idx[alive], cur[alive]
         if not idx.size:
             break
         reached[idx] += 1
         cur = nxt[cur]
-    idx = np.concatenate(chains)
-    cur = prv[c0[idx]]
-    for _ in range(limit):
-        alive = cur >= 0
-        idx, cur = idx[alive], cur[alive]
-        if not idx.size:
-            break
-        reached[idx] += 1
-        cur = prv[cur]
+    chain = np.concatenate(chains) if chains else np.zeros(0, dtype=it)
+    if chain.size:
+        has_next = ~walled
+        prv = np.full(nc, -1, dtype=it)
+        prv[nxt[has_next]] = np.flatnonzero(has_next)
+        idx, cur = chain, prv[c0[chain]]
+        for _ in range(limit):
+            alive = cur >= 0
+            idx, cur = idx[alive], cur[alive]
+            if not idx.size:
+                break
+            reached[idx] += 1
+            cur = prv[cur]
     bad = vs[reached != count[vs]]
     if bad.size:
+        _check_duplicate_faces(f)  # the clearer message when that is the cause
         raise ValueError(
             f"non-manifold vertices (their faces form several fans): vertices [{list_some(bad)}]"
         )
+    pillow = count[vs] == 2
+    pillow[chain] = False
+    if pillow.any():
+        _check_duplicate_faces(f)
