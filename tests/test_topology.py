@@ -170,3 +170,35 @@ def test_fan_check_agrees_with_connected_components(case):
             Topology(torch.from_numpy(f))
     else:
         Topology(torch.from_numpy(f))
+
+
+@pytest.mark.parametrize("mesh", ["closed", "open"])
+def test_int64_work_arrays_give_the_same_topology_and_operators(mesh, monkeypatch):
+    """Meshes too large for int32 work arrays take the int64 path; it must agree exactly."""
+    import torch_edgevf.topology as topology_module
+
+    v, f = perturbed_icosphere(1, seed=3) if mesh == "closed" else perturbed_grid(5, seed=3)
+    small = Topology(f, num_vertices=v.shape[0])
+    monkeypatch.setattr(topology_module, "_work_dtype", lambda nv, nf: np.int64)
+    large = Topology(f, num_vertices=v.shape[0])
+    assert large.side_corners().dtype == np.int64 and small.side_corners().dtype == np.int32
+    for name in ("faces", "edges", "face_edges", "face_edge_signs", "edge_faces", "edge_corners",
+                 "boundary_edges", "boundary_vertices"):
+        a, b = getattr(small, name), getattr(large, name)
+        assert a.dtype == b.dtype and torch.equal(a, b), name
+    for n in (0, 1, 3):
+        la, lb = ev.connection_laplacian(v, small, n), ev.connection_laplacian(v, large, n)
+        assert torch.equal(la.indices(), lb.indices()) and torch.equal(la.values(), lb.values())
+    assert torch.equal(ev.mass_matrix(v, small).values(), ev.mass_matrix(v, large).values())
+
+
+def test_topology_pickles_with_its_lazy_attributes():
+    import pickle
+
+    v, f = perturbed_icosphere(1, seed=4)
+    t = Topology(f)
+    _ = t.edges  # one made before pickling, the others after
+    u = pickle.loads(pickle.dumps(t))
+    for name in ("faces", "edges", "face_edges", "face_edge_signs", "edge_faces", "edge_corners"):
+        assert torch.equal(getattr(t, name), getattr(u, name)), name
+    assert torch.equal(ev.connection_laplacian(v, u).to_dense(), ev.connection_laplacian(v, t).to_dense())

@@ -231,34 +231,56 @@ class EdgePairPattern(_OnDevice):
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, self._gather) + self._diag
 
-    def assemble(self, diag: torch.Tensor, upper: torch.Tensor, lower: torch.Tensor | None = None) -> torch.Tensor:
-        """Sparse COO from face-major ``(F, 3)`` diagonal, upper and lower face terms.
+    def assemble(self, diag, upper, lower=None) -> torch.Tensor:
+        """Sparse COO from face-major diagonal, upper and lower face terms.
 
-        ``lower=None`` means ``upper.conj()`` (a Hermitian operator; ``upper`` for real ones).
+        Each term is an ``(F, 3)`` tensor or a sequence of its three ``(F,)`` columns (corner
+        ``k``); columns are written straight into the value buffer. ``lower=None`` means
+        ``conj(upper)``: a Hermitian operator (``upper`` itself for a real one).
         """
-        indices, gather, side0, side1 = self._tensors(upper.device)
+        terms = [t for t in (diag, upper, lower) if t is not None]
+        if isinstance(diag, (list, tuple)):
+            diag = torch.stack(diag, dim=1)
+        columns = [t for t in (upper, lower) if isinstance(t, (list, tuple))]
+        first = columns[0][0] if columns else upper
+        device = first.device
+        indices, gather, side0, side1 = self._tensors(device)
         ne, nf = self.shape[0], self._num_faces
-        lower_dtype = upper.dtype if lower is None else lower.dtype
-        dtype = torch.promote_types(torch.promote_types(diag.dtype, upper.dtype), lower_dtype)
+        dtype = diag.dtype
+        for t in (upper, lower):
+            for piece in (t if isinstance(t, (list, tuple)) else [t] if t is not None else []):
+                dtype = torch.promote_types(dtype, piece.dtype)
         flat = diag.reshape(-1)
         if not self._closed:
             flat = torch.cat([flat, flat.new_zeros(1)])
         on_diag = flat.index_select(0, side0) + flat.index_select(0, side1)
-        if torch.is_grad_enabled() and any(
-            t is not None and t.requires_grad for t in (diag, upper, lower)
-        ):
-            low = upper.conj() if lower is None else lower
-            values = torch.cat([on_diag.to(dtype), upper.reshape(-1).to(dtype), low.reshape(-1).to(dtype)])
-        else:  # one buffer, filled in place (no concatenation, no materialised conjugate)
-            values = torch.empty(ne + 6 * nf, dtype=dtype, device=upper.device)
+        tracked = torch.is_grad_enabled() and any(
+            piece.requires_grad for t in terms for piece in (t if isinstance(t, (list, tuple)) else [t])
+        )
+
+        def face_major(t):
+            return (torch.stack(list(t), dim=1) if isinstance(t, (list, tuple)) else t).reshape(-1).to(dtype)
+
+        if tracked:
+            up = face_major(upper)
+            low = up.conj() if lower is None else face_major(lower)
+            values = torch.cat([on_diag.to(dtype), up, low])
+        else:  # one buffer, filled in place: no concatenation, no stacked or conjugated copy
+            values = torch.empty(ne + 6 * nf, dtype=dtype, device=device)
             values[:ne] = on_diag
-            values[ne:ne + 3 * nf] = upper.reshape(-1)
-            if lower is not None:
-                values[ne + 3 * nf:] = lower.reshape(-1)
-            elif dtype.is_complex:
-                torch.conj_physical(values[ne:ne + 3 * nf], out=values[ne + 3 * nf:])
-            else:
-                values[ne + 3 * nf:] = values[ne:ne + 3 * nf]
+            up, low = values[ne:ne + 3 * nf], values[ne + 3 * nf:]
+            for t, out in ((upper, up), (lower, low)):
+                if isinstance(t, (list, tuple)):
+                    out = out.view(nf, 3)
+                    for k in range(3):
+                        out[:, k] = t[k]
+                elif t is not None:
+                    out.copy_(t.reshape(-1))
+            if lower is None:
+                if dtype.is_complex:
+                    torch.conj_physical(up, out=low)
+                else:
+                    low.copy_(up)
         return sparse_coo(indices, values.index_select(0, gather), self.shape)
 
     def assemble_pairs(self, values: torch.Tensor) -> torch.Tensor:

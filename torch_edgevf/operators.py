@@ -212,19 +212,19 @@ def _connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: To
     a2 = geom.double_area
     lt, dt = geom.lengths.t(), geom.dots.t()  # (3, F)
     inv_a2 = 1 / a2
-    diag = torch.stack([2 * lt[k] * lt[k] * inv_a2 for k in range(3)], dim=1)
+    diag = [2 * lt[k] * lt[k] * inv_a2 for k in range(3)]
     dc = [dt[(j + 2) % 3] for j in range(3)]
     weight = [-2 * dc[j] * inv_a2 for j in range(3)]
     pattern = _pattern(topo, "EE")
     if n == 0:
-        return pattern.assemble(diag, torch.stack(weight, dim=1))
+        return pattern.assemble(diag, weight)
     upper = []
     st = signs.t()
     for j in range(3):
         inv_lab = 1 / (lt[j] * lt[(j + 1) % 3])
         w = weight[j] if n % 2 == 0 else weight[j] * (-st[j] * st[(j + 1) % 3])
         upper.append(w * _int_power(torch.complex(dc[j] * inv_lab, -a2 * inv_lab), n))
-    return pattern.assemble(diag, torch.stack(upper, dim=1))  # lower = conj(upper): Hermitian
+    return pattern.assemble(diag, upper)  # lower = conj(upper): Hermitian
 
 
 def _gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:

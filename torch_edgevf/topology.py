@@ -75,8 +75,7 @@ class Topology:
         f = faces.detach().cpu().numpy()
         nf = f.shape[0]
         nv = _check_indices(f, num_vertices)
-        # int32 work arrays where every index fits (half the memory traffic of int64)
-        it = np.int32 if max(nv, 6 * nf + 2) < 2**31 - 1 else np.int64
+        it = _work_dtype(nv, nf)
         fi = f.astype(it)
 
         src, dst = fi[:, _NEXT], fi[:, _PREV]  # the half-edge opposite each corner
@@ -259,6 +258,11 @@ def remove_unreferenced_vertices(verts: torch.Tensor, faces) -> tuple[torch.Tens
     new_index = torch.full((verts.shape[0],), -1, dtype=torch.int64, device=faces.device)
     new_index[kept] = torch.arange(kept.numel(), device=faces.device)
     return verts[kept.to(verts.device)], new_index[faces], kept
+
+
+def _work_dtype(nv: int, nf: int):
+    """int32 work arrays where every index fits (half the memory traffic of int64), else int64."""
+    return np.int32 if max(nv, 6 * nf + 2) < 2**31 - 1 else np.int64
 
 
 def _edges_of(keys: np.ndarray, nv: int) -> np.ndarray:
