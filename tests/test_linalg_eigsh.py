@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import scipy.linalg
+import scipy.sparse
 import torch
 from test_linalg_problems import grid_laplacian
 
@@ -324,3 +325,102 @@ def test_eigenvalue_gradient_through_sparse_matrix_constructor():
     (g1,) = torch.autograd.grad(lam1.sum(), v1)
     (g2,) = torch.autograd.grad(lam2.sum(), v2)
     torch.testing.assert_close(g1, g2, rtol=1e-13, atol=1e-15)
+
+
+# ------------------------------------------------------------------- cholespy back-end
+
+
+@pytest.fixture
+def no_cholmod(monkeypatch):
+    """The factor module with scikit-sparse hidden and cholespy installed (else skip)."""
+    pytest.importorskip("cholespy")
+    from torch_edgevf.linalg import factor as factor_module
+
+    monkeypatch.setattr(factor_module, "cholmod_module", lambda: None)
+    return factor_module
+
+
+def _scipy(A):
+    from torch_edgevf.linalg._utils import as_sparse
+
+    return as_sparse(A).to_scipy()
+
+
+def test_cholespy_factor_for_many_solves_of_real_spd_only(no_cholmod):
+    import scipy.sparse.linalg as sla
+
+    fm = no_cholmod
+    K = _scipy(grid_laplacian(6, 7, torch.float64, shift=0.1).A)
+    f = fm.factorize(K, "auto", hermitian=True, many_solves=True)
+    assert f.backend == "cholespy"
+    rng = np.random.default_rng(0)
+    for b in (rng.standard_normal(42), rng.standard_normal((42, 3)),
+              rng.standard_normal((42, 2)) + 1j * rng.standard_normal((42, 2))):
+        np.testing.assert_allclose(f.solve(b), sla.spsolve(K.tocsc().astype(b.dtype), b), rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose(f.solve(b, adjoint=True), f.solve(b), rtol=0, atol=0)
+    # one-off solves keep SuperLU (cheaper factorization); complex matrices never use cholespy
+    assert fm.factorize(K, "auto", hermitian=True).backend == "superlu-hermitian"
+    Kc = _scipy(grid_laplacian(6, 7, torch.complex128, shift=0.1).A)
+    assert fm.factorize(Kc, "auto", hermitian=True, many_solves=True).backend == "superlu-hermitian"
+    # an indefinite matrix: Cholesky refuses it, "auto" falls back to LU
+    Ki = (K - 2.0 * scipy.sparse.identity(42)).tocsc()
+    with pytest.raises(fm.NotPositiveDefiniteError):
+        fm.factorize(Ki, "cholesky", hermitian=True, many_solves=True)
+    assert fm.factorize(Ki, "auto", hermitian=True, many_solves=True).backend == "superlu"
+
+
+def test_cholespy_missing_is_logged_once(no_cholmod, monkeypatch, caplog):
+    import logging
+
+    fm = no_cholmod
+    monkeypatch.setattr(fm, "cholespy_module", lambda: None)
+    fm._log_no_cholespy.cache_clear()
+    K = _scipy(grid_laplacian(6, 7, torch.float64, shift=0.1).A)
+    try:
+        with caplog.at_level(logging.INFO, logger=fm.__name__):
+            backends = {fm.factorize(K, "auto", hermitian=True, many_solves=True).backend for _ in range(2)}
+        assert backends == {"superlu-hermitian"}
+        assert len([r for r in caplog.records if "cholespy" in r.getMessage()]) == 1
+    finally:
+        fm._log_no_cholespy.cache_clear()
+
+
+@pytest.fixture
+def cholespy_factors(no_cholmod, monkeypatch):
+    """Records every cholespy factorization made while the test runs."""
+    made = []
+    base = no_cholmod._CholespyFactor
+
+    class Recorded(base):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(no_cholmod, "_CholespyFactor", Recorded)
+    return made
+
+
+@pytest.mark.parametrize("k", [1, 5])
+def test_eigsh_with_cholespy_matches_dense_eigh(k, cholespy_factors):
+    p = grid_laplacian(8, 9, torch.float64, shift=0.05)
+    lam, X = eigsh(p.A, p.m, k, method="lanczos")
+    assert len(cholespy_factors) == 1
+    ref_lam, ref_X = reference(p, k)
+    np.testing.assert_allclose(lam.numpy(), ref_lam, rtol=1e-12)
+    Md = torch.diag(p.m)
+    overlap = (X.mT @ Md @ torch.from_numpy(ref_X)).abs().diagonal()
+    torch.testing.assert_close(overlap, torch.ones(k, dtype=overlap.dtype), atol=1e-10, rtol=0)
+    residual = (p.A.to_dense() @ X - Md @ X * lam).norm(dim=0) / (p.A.to_dense() @ X).norm(dim=0)
+    assert float(residual.max()) < 1e-10
+
+
+def test_gradcheck_eigsh_with_cholespy(cholespy_factors):
+    """Eigenvalues and eigenvector losses (the backward's complement CG uses the cholespy factor)."""
+    p = grid_laplacian(4, 5, torch.float64, shift=0.05)
+
+    def f(params, m):
+        lam, X = eigsh(p.hermitian(params), m, 2, method="lanczos")
+        return lam, X ** 2, X
+
+    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
+    assert cholespy_factors

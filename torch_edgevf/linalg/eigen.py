@@ -497,7 +497,7 @@ def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
         s = np.sqrt(mdiag).astype(np.finfo(dtype).dtype)
         d = 1.0 / s
         K.data *= d[K.indices] * np.repeat(d, np.diff(K.indptr))  # S^-1 K S^-1
-        scaled = factorize(K, "auto", hermitian=True)
+        scaled = factorize(K, "auto", hermitian=True, many_solves=True)
         factor = _ScaledFactor(scaled, s)
         inner = _Inner(dtype)
 
@@ -507,7 +507,7 @@ def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
         start = start * s[:, None]
     else:
         s = None
-        factor = factorize(K, "auto", hermitian=True)
+        factor = factorize(K, "auto", hermitian=True, many_solves=True)
         inner = _Inner(dtype, mmul=lambda W: np.asfortranarray(M @ W))
 
         def op(Y):
@@ -612,7 +612,7 @@ def _complement_adjoint(ctx, lam, X, G):
     Xn, Gn, lam_n = to_numpy(X), to_numpy(G), to_numpy(lam)
     R = Gn - (M @ Xn) @ (Xn.conj().T @ Gn)
     if ctx.factor is None:
-        ctx.factor = factorize((A - ctx.sigma * M).tocsc(), "auto", hermitian=True)
+        ctx.factor = factorize((A - ctx.sigma * M).tocsc(), "auto", hermitian=True, many_solves=True)
     eps = float(np.finfo(A.dtype).eps)
     W = _complement_solve(A, M, Xn, lam_n, R, ctx.factor.solve, tol=max(1e-12, 10 * eps),
                           maxiter=max(100, min(n, 1000)))
