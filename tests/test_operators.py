@@ -273,3 +273,30 @@ def test_bad_field_inputs(closed_mesh):
         ev.face_curl(v, t, w)
     with pytest.raises(ValueError, match="integer >= 0"):
         ev.connection_laplacian(v, t, -1)
+
+
+@pytest.mark.parametrize("mesh", ["closed", "open", "tetrahedron"])
+def test_gather_patterns_match_the_generic_sorted_pattern(mesh):
+    """The gather-only G (E, V) and vertex-pair (V, V) patterns equal the sort-and-sum Pattern."""
+    from torch_edgevf import operators as ops
+    from torch_edgevf._sparse import Pattern
+    from torch_edgevf.geometry import PAIR_A, PAIR_B
+
+    if mesh == "closed":
+        v, f = perturbed_icosphere(2, seed=1)
+    elif mesh == "open":
+        v, f = perturbed_grid(6, seed=2)
+    else:  # opposite vertices across every edge are joined by an edge
+        v, f = perturbed_icosphere(0, seed=3)[0][:4], torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+    t = ev.Topology(f, num_vertices=v.shape[0])
+    fe, ff = t.face_edges.numpy(), t.faces.numpy()
+    x = torch.randn(9 * t.num_faces, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    generic = {
+        "EV": Pattern(fe[:, PAIR_A].T, ff[:, PAIR_B].T, (t.num_edges, t.num_vertices)),  # pair-major
+        "VV": Pattern(ff[:, PAIR_A], ff[:, PAIR_B], (t.num_vertices, t.num_vertices)),  # face-major
+    }
+    for name, reference in generic.items():
+        a, b = reference.assemble(x), ops._pattern(t, name).assemble(x)
+        assert a.shape == b.shape and b.is_coalesced()
+        assert torch.equal(a.indices(), b.indices()), name
+        torch.testing.assert_close(b.values(), a.values(), rtol=0, atol=1e-14)

@@ -14,7 +14,8 @@ import sys
 import numpy as np
 import torch
 
-__all__ = ["Pattern", "EdgePairPattern", "sparse_coo", "diagonal", "unique_pairs"]
+__all__ = ["Pattern", "EdgePairPattern", "EdgeVertexPattern", "VertexPairPattern", "sparse_coo", "diagonal",
+           "unique_pairs", "symmetric_layout"]
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
@@ -288,3 +289,206 @@ class EdgePairPattern(_OnDevice):
         v = values.reshape(-1, 9)
         # diag (k, k); upper (k, k+1); lower (k+1, k)
         return self.assemble(v[:, [0, 4, 8]], v[:, [1, 5, 6]], v[:, [3, 7, 2]])
+
+
+def symmetric_layout(up_row: np.ndarray, up_col: np.ndarray, has_diag: np.ndarray, nv: int):
+    """Sorted COO layout of a symmetric ``(V, V)`` pattern from its unique upper pairs.
+
+    ``up_row < up_col`` must be sorted lexicographically. Returns ``(indices, gather)``: the
+    ``(2, nnz)`` int64 indices, and for each nonzero its position in the value vector
+    ``[diagonal (V) | upper (U) | lower (U)]``, where ``lower[u]`` is the value at the
+    transpose of upper pair ``u``.
+    """
+    nu = up_row.shape[0]
+    n_upper = np.bincount(up_row, minlength=nv)
+    n_lower = np.bincount(up_col, minlength=nv)
+    row_len = n_lower + has_diag + n_upper
+    row_start = np.cumsum(row_len) - row_len
+    nnz = int(row_len.sum())
+    gather = np.empty(nnz, dtype=_index_dtype(nv + 2 * nu))
+    out_cols = np.empty(nnz, dtype=np.int64)
+    diag = np.flatnonzero(has_diag)
+    diag_pos = (row_start + n_lower)[diag]
+    gather[diag_pos] = diag
+    out_cols[diag_pos] = diag
+    # upper entries, already sorted by (row, col): rank within the row
+    first_upper = np.cumsum(n_upper) - n_upper
+    rank = np.arange(nu) - first_upper[up_row]
+    upper_pos = row_start[up_row] + n_lower[up_row] + has_diag[up_row] + rank
+    gather[upper_pos] = nv + np.arange(nu)
+    out_cols[upper_pos] = up_col
+    del upper_pos, rank
+    # lower entries (v, u), sorted by (v, u): a stable sort by v keeps u increasing
+    order = np.argsort(up_col, kind="stable")
+    lo_row = up_col[order]
+    first_lower = np.cumsum(n_lower) - n_lower
+    lower_pos = row_start[lo_row] + (np.arange(nu) - first_lower[lo_row])
+    gather[lower_pos] = nv + nu + order
+    out_cols[lower_pos] = up_row[order]
+    indices = np.empty((2, nnz), dtype=np.int64)
+    indices[0] = np.repeat(np.arange(nv), row_len)
+    indices[1] = out_cols
+    return indices, gather
+
+
+def _first_and_rest(first: np.ndarray, second: np.ndarray, none: int, index):
+    """Split "the sum of up to two sources per entry" (``none`` marks a missing one) into a
+    gather of one source per entry and an add of the second ones: ``(first, rest_pos, rest_src)``."""
+    first, second = first.ravel(), second.ravel()
+    swap = first == none
+    if swap.any():
+        first = np.where(swap, second, first)
+        second = np.where(swap, none, second)
+    rest = np.flatnonzero(second != none)
+    return tuple(torch.from_numpy(a.astype(index, copy=False)) for a in (first, rest, second[rest]))
+
+
+def _gather_sum(values: torch.Tensor, first: torch.Tensor, rest_pos: torch.Tensor, rest_src: torch.Tensor):
+    """``values[first]``, then ``values[rest_src]`` added at ``rest_pos``."""
+    out = values.index_select(0, first)
+    return out.index_add(0, rest_pos, values.index_select(0, rest_src)) if rest_pos.numel() else out
+
+
+class EdgeVertexPattern(_OnDevice):
+    """The ``(E, V)`` pattern of the gradient ``G``, filled by gathers (no scatter, no sort).
+
+    Row ``e = (i, j)`` holds ``i``, ``j`` and the vertex opposite ``e`` in each of its faces.
+    A face contributes ``values[p F + f]`` at ``(edge opposite corner a, vertex of corner b)``
+    for the corner pair ``p = 3 a + b`` (pair-major, as :class:`Pattern` would take it): the
+    endpoints sum one term from each face, the opposite vertices take one.
+
+    Parameters
+    ----------
+    faces : (F, 3) int array
+    edges : (E, 2) int array
+    side_corners : (E, 2) int array, see :meth:`Topology.side_corners`
+    num_vertices : int
+    """
+
+    def __init__(self, faces, edges, side_corners, num_vertices: int):
+        flat_f = np.ascontiguousarray(faces).ravel()
+        sc = np.asarray(side_corners)
+        ne, nf, nv = sc.shape[0], flat_f.shape[0] // 3, int(num_vertices)
+        self.shape = (ne, nv)
+        none = 9 * nf  # marks a missing term
+        it = np.int32 if none < 2**31 - 1 and sc.dtype == np.int32 else np.int64
+        # slots of row e: i, j, and the vertices opposite e in its side-0 and side-1 faces
+        keys = np.empty((ne, 4), dtype=np.int64)
+        keys[:, :2] = edges
+        first = np.empty((ne, 4), dtype=it)
+        second = np.full((ne, 4), none, dtype=it)
+        nxt_k, prv_k = np.array([1, 2, 0], dtype=it), np.array([2, 0, 1], dtype=it)
+        for side in (0, 1):
+            c = sc[:, side].astype(it)
+            missing = c < 0
+            k = c % 3
+            base = c // 3 + 3 * nf * k  # pair (k, b) of face g is (3 k + b) F + g = base + b F
+            to_self = base + k * nf
+            to_next = base + nxt_k[k] * nf  # towards corner k + 1: i on side 0, j on side 1
+            to_prev = base + prv_k[k] * nf
+            opposite = flat_f[np.where(missing, 0, c)]
+            if missing.any():
+                to_self[missing] = to_next[missing] = to_prev[missing] = none
+                opposite[missing] = nv  # sorts last and is dropped
+            keys[:, 2 + side] = opposite
+            if side == 0:
+                first[:, 0], first[:, 1], first[:, 2] = to_next, to_prev, to_self
+            else:
+                second[:, 0], second[:, 1], first[:, 3] = to_prev, to_next, to_self
+        keys <<= 2
+        keys |= np.arange(4)  # sort each row by column, remember the slot
+        keys.sort(axis=1)
+        slot = (keys & 3).astype(np.intp)
+        first = np.take_along_axis(first, slot, axis=1)
+        second = np.take_along_axis(second, slot, axis=1)
+        del slot
+        indices = np.empty((2, 4 * ne), dtype=np.int64)
+        np.right_shift(keys, 2, out=indices[1].reshape(ne, 4))
+        del keys
+        indices[0].reshape(ne, 4)[:] = np.arange(ne)[:, None]
+        if not bool((sc >= 0).all()):
+            valid = indices[1] < nv
+            indices, first, second = indices[:, valid], first.ravel()[valid], second.ravel()[valid]
+        self._indices = torch.from_numpy(indices)
+        self._sources = _first_and_rest(first, second, none, _index_dtype(9 * nf + 1))
+        self.nnz = int(indices.shape[1])
+        self.num_contributions = 9 * nf
+
+    @property
+    def indices(self) -> torch.Tensor:
+        """(2, nnz) int64 row and column indices, sorted lexicographically."""
+        return self._indices
+
+    def _host(self) -> tuple[torch.Tensor, ...]:
+        return (self._indices, *self._sources)
+
+    def assemble(self, values: torch.Tensor) -> torch.Tensor:
+        """Sparse COO from the ``(9 F,)`` pair-major face contributions."""
+        if values.shape[0] != self.num_contributions:
+            raise ValueError(f"expected {self.num_contributions} contributions, got {values.shape[0]}")
+        indices, *sources = self._tensors(values.device)
+        return sparse_coo(indices, _gather_sum(values, *sources), self.shape)
+
+
+class VertexPairPattern(_OnDevice):
+    """The symmetric ``(V, V)`` pattern of per-face vertex-pair operators (P1 mass, cotan).
+
+    A face contributes ``values[9 f + 3 a + b]`` at (vertex of corner a, vertex of corner b)
+    (face-major, as :class:`Pattern` would take it). The diagonal sums the corners at each
+    vertex (one ``index_add``); every off-diagonal entry sums one term from each face of its
+    edge (two gathers); one more gather puts them in sorted COO order.
+
+    Parameters
+    ----------
+    faces : (F, 3) int array
+    edges : (E, 2) int array
+    side_corners : (E, 2) int array, see :meth:`Topology.side_corners`
+    num_vertices : int
+    """
+
+    def __init__(self, faces, edges, side_corners, num_vertices: int):
+        f = np.ascontiguousarray(faces)
+        sc = np.asarray(side_corners, dtype=np.int64)
+        edges = np.asarray(edges, dtype=np.int64)
+        nf, nv = f.shape[0], int(num_vertices)
+        self.shape = (nv, nv)
+        none = 9 * nf
+        k, g = sc % 3, sc // 3
+        nxt, prv = (k + 1) % 3, (k + 2) % 3
+
+        def term(a, b):
+            return np.where(sc >= 0, 9 * g + 3 * a + b, none)
+
+        # side 0: corner k + 1 is i, k + 2 is j; side 1 the reverse
+        ij, ji = term(nxt, prv), term(prv, nxt)
+        index = _index_dtype(9 * nf + 1)
+        # [upper (i, j) | lower (j, i)] entries, each the sum of a term of each face
+        self._pairs = _first_and_rest(np.concatenate([ij[:, 0], ji[:, 0]]), np.concatenate([ji[:, 1], ij[:, 1]]),
+                                      none, index)
+        corners = f.ravel()
+        self._diag_rows = torch.from_numpy(corners.astype(index))
+        corner = np.arange(3 * nf)
+        self._diag_src = torch.from_numpy((9 * (corner // 3) + 4 * (corner % 3)).astype(index))  # pair (k, k)
+        has_diag = np.bincount(corners, minlength=nv) > 0
+        indices, gather = symmetric_layout(edges[:, 0], edges[:, 1], has_diag, nv)
+        self._indices = torch.from_numpy(indices)
+        self._gather = torch.from_numpy(gather)
+        self.nnz = int(gather.shape[0])
+        self.num_contributions = 9 * nf
+
+    @property
+    def indices(self) -> torch.Tensor:
+        """(2, nnz) int64 row and column indices, sorted lexicographically."""
+        return self._indices
+
+    def _host(self) -> tuple[torch.Tensor, ...]:
+        return (self._indices, self._gather, self._diag_rows, self._diag_src, *self._pairs)
+
+    def assemble(self, values: torch.Tensor) -> torch.Tensor:
+        """Sparse COO from the ``(9 F,)`` face-major pair contributions."""
+        if values.shape[0] != self.num_contributions:
+            raise ValueError(f"expected {self.num_contributions} contributions, got {values.shape[0]}")
+        indices, gather, diag_rows, diag_src, *pairs = self._tensors(values.device)
+        diag = values.new_zeros(self.shape[0]).index_add(0, diag_rows, values.index_select(0, diag_src))
+        off = _gather_sum(values, *pairs)
+        return sparse_coo(indices, torch.cat([diag, off]).index_select(0, gather), self.shape)

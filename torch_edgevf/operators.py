@@ -26,7 +26,17 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ._sparse import EdgePairPattern, Pattern, _index_dtype, diagonal, sparse_coo, unique_pairs
+from ._sparse import (
+    EdgePairPattern,
+    EdgeVertexPattern,
+    Pattern,
+    VertexPairPattern,
+    _index_dtype,
+    diagonal,
+    sparse_coo,
+    symmetric_layout,
+    unique_pairs,
+)
 from ._validation import check_n
 from .geometry import (
     OFF_DIAGONAL,
@@ -74,9 +84,9 @@ def _pattern(topo: Topology, name: str) -> Pattern:
         if name == "EE":
             return EdgePairPattern(fe, topo.side_corners())
         if name == "EV":  # pair-major: contribution p F + f, for the corner pair p = 3a + b of face f
-            return Pattern(fe[:, _A].T, f[:, _B].T, (ne, nv))
-        if name == "VV":
-            return Pattern(f[:, _A], f[:, _B], (nv, nv))
+            return EdgeVertexPattern(f, topo.edges.numpy(), topo.side_corners(), nv)
+        if name == "VV":  # face-major: contribution 9 f + p
+            return VertexPairPattern(f, topo.edges.numpy(), topo.side_corners(), nv)
         if name == "FE":
             return Pattern(np.repeat(np.arange(nf), 3), fe, (nf, ne))
         raise KeyError(name)
@@ -116,34 +126,10 @@ def _laplace_beltrami_plan(topo: Topology):
         up_col = keys - up_row * nv
         del keys
         has_diag = np.bincount(cols, minlength=nv) > 0
-        n_upper = np.bincount(up_row, minlength=nv)
-        n_lower = np.bincount(up_col, minlength=nv)
-        row_len = n_lower + has_diag + n_upper
-        row_start = np.cumsum(row_len) - row_len
-        nnz = int(row_len.sum())
-        index = _index_dtype(nv + 2 * nu)
-        gather = np.empty(nnz, dtype=index)
-        out_cols = np.empty(nnz, dtype=np.int64)
-        # diagonal
-        diag_pos = (row_start + n_lower)[has_diag]
-        gather[diag_pos] = np.flatnonzero(has_diag)
-        out_cols[diag_pos] = np.flatnonzero(has_diag)
-        # upper entries, already sorted by (row, col): rank within the row
-        first_upper = np.cumsum(n_upper) - n_upper
-        upper_pos = row_start[up_row] + n_lower[up_row] + has_diag[up_row] + (np.arange(nu) - first_upper[up_row])
-        gather[upper_pos] = nv + np.arange(nu)
-        out_cols[upper_pos] = up_col
-        del upper_pos, first_upper
-        # lower entries (v, u): sorted by (v, u) through the transposed keys
-        order = np.argsort(up_col * nv + up_row)
-        lo_row = up_col[order]
-        first_lower = np.cumsum(n_lower) - n_lower
-        lower_pos = row_start[lo_row] + (np.arange(nu) - first_lower[lo_row])
-        gather[lower_pos] = nv + nu + order
-        out_cols[lower_pos] = up_row[order]
-        out_rows = np.repeat(np.arange(nv), row_len)
+        indices, gather = symmetric_layout(up_row, up_col, has_diag, nv)
+        index = _index_dtype(max(nv + 2 * nu, cols.shape[0] + 1))
         return {
-            "indices": torch.from_numpy(np.stack([out_rows, out_cols])),
+            "indices": torch.from_numpy(indices),
             "rows": torch.from_numpy(rows.astype(index)),
             "cols": torch.from_numpy(cols.astype(index)),
             "p": torch.from_numpy(p.astype(index)),
