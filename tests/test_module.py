@@ -88,3 +88,21 @@ def test_bad_arguments(mesh):
     with pytest.raises(ValueError, match="rows but the topology"):
         ev.EdgeOperators(v[:-1], ev.Topology(f))
     assert "E=120" in repr(ev.EdgeOperators(v, f))
+
+
+def test_failed_update_keeps_the_previous_operators():
+    v, f = ev.icosphere(1)
+    ops = ev.EdgeOperators(v, f)
+    before = {name: buf.clone() for name, buf in ops.named_buffers()}
+    bad = v.clone()
+    bad[3, 0] = float("nan")
+    with pytest.raises(ValueError, match="NaN"):
+        ops.update(bad)
+    degenerate = v.clone()
+    degenerate[f[5]] = v[f[5, 0]]  # three corners at one point: zero-area faces
+    with pytest.raises(ValueError, match="zero-area"):
+        ops.update(degenerate)
+    for name, buf in ops.named_buffers():
+        b = before[name]
+        same = torch.equal(buf.to_dense(), b.to_dense()) if buf.is_sparse else torch.equal(buf, b)
+        assert same, name

@@ -73,17 +73,21 @@ class EdgeOperators(nn.Module):
         verts = as_verts(verts)
         topo = self.topology
         check_vertex_count(verts, topo.num_vertices)
-        geom = face_geometry(verts, topo)
+        geom = face_geometry(verts, topo)  # validates the positions before anything is replaced
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         mass_values = ops._mass_values(geom, topo)
-        gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
         e = self.edges.to(verts.device)
+        # Each operator replaces its predecessor as soon as it is built, so that the old and
+        # the new set of operators are never held together (peak memory of large meshes).
         self.verts = verts
         self.mass = ops.diagonal(mass_values)
+        self.connection_laplacian = None
         self.connection_laplacian = ops._connection_laplacian_from(geom, signs, topo, self.n)
-        self.gradient = gradient
+        self.gradient = self.laplace_beltrami = None
+        self.gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
+        self.laplace_beltrami = ops._laplace_beltrami_from(self.gradient.values(), mass_values, topo)
         self.curl_div = ops._pattern(topo, "FE").assemble(ops._curl_values(geom, signs))
-        self.laplace_beltrami = ops._laplace_beltrami_from(gradient.values(), mass_values, topo)
+        self.vertex_mass = None
         self.vertex_mass = ops._vertex_mass_from(geom, topo, lumped=False)
         self.lumped_vertex_mass = ops._vertex_mass_from(geom, topo, lumped=True)
         self.face_area = geom.area
