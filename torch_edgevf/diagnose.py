@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import torch
-
 from ._validation import as_faces, as_verts
 from .geometry import face_geometry
 from .topology import Topology

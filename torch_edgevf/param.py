@@ -50,7 +50,7 @@ import scipy.sparse.csgraph as csg
 import scipy.sparse.linalg as sla
 import torch
 
-from .geometry import _topology_and_verts, face_geometry, mean_edge_length
+from .geometry import _topology_and_verts, mean_edge_length
 from .operators import _edge_field
 from .singularities import face_frame_angles, singularities, split_singular_faces
 from .topology import Topology
@@ -447,7 +447,6 @@ def parametrize(
     ncls, cls = csg.connected_components(sp.coo_matrix((np.ones(a.size), (a, b)), shape=(nc, nc)), directed=False)
     cls = cls.reshape(nf, 3)
 
-    theta = face_frame_angles(verts, topo).numpy()
     vnp = verts.numpy()
     d0 = vnp[fl[:, 2]] - vnp[fl[:, 1]]
     d0 *= topo.face_edge_signs.numpy()[:, :1]

@@ -427,7 +427,7 @@ def split_faces(verts, faces, z, which, barycentric, n: int = 1) -> SplitResult:
         bad = which[(bary.detach() <= 0).any(1)].tolist()
         raise ValueError(f"barycentric coordinates must be > 0 (strictly inside) at faces {bad[:10]}")
     k = which.numel()
-    nv, ne = topo.num_vertices, topo.num_edges
+    nv = topo.num_vertices
     fl = topo.faces.to(dev)
     fw = fl[which]
     p = verts[fw]

@@ -37,7 +37,6 @@ import torch
 from .geometry import _topology_and_verts
 from .linalg import SparseSolver, expm_multiply, solve
 from .operators import _edge_field, connection_laplacian, covariant_derivative, mass_matrix
-from .topology import Topology
 
 __all__ = ["Transporter", "transport"]
 
