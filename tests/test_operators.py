@@ -300,3 +300,33 @@ def test_gather_patterns_match_the_generic_sorted_pattern(mesh):
         assert a.shape == b.shape and b.is_coalesced()
         assert torch.equal(a.indices(), b.indices()), name
         torch.testing.assert_close(b.values(), a.values(), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("mesh", ["tetrahedron", "octahedron", "open", "closed"])
+def test_laplace_beltrami_equals_dense_product(mesh):
+    """L = Re(G^H M_z^-1 G), also where a diamond's diagonal is an edge (tetrahedron) or is
+    shared by two edges (octahedron)."""
+    if mesh == "tetrahedron":
+        v = torch.tensor([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=torch.float64)
+        f = torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+    elif mesh == "octahedron":
+        v = torch.tensor([[0.0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]],
+                         dtype=torch.float64) + 0.05 * torch.randn(6, 3, dtype=torch.float64,
+                                                                    generator=torch.Generator().manual_seed(1))
+        f = torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
+    elif mesh == "open":
+        v, f = perturbed_grid(5, seed=4)
+    else:
+        v, f = perturbed_icosphere(1, seed=5)
+    t = ev.Topology(f, num_vertices=v.shape[0])
+    G = ev.gradient(v, t).to_dense()
+    m = ev.mass_matrix(v, t).to_dense().diagonal()
+    expected = (G.conj().T @ (G / m[:, None])).real
+    L = ev.laplace_beltrami(v, t)
+    assert L.is_coalesced()
+    torch.testing.assert_close(L.to_dense(), expected, rtol=0, atol=1e-13)
+    # the pattern is exactly the structural nonzeros of G^H G (pairs of vertices in a row of G)
+    reach = (G != 0).to(torch.float64).T @ (G != 0).to(torch.float64) > 0
+    pattern = torch.zeros_like(reach)
+    pattern[L.indices()[0], L.indices()[1]] = True
+    assert torch.equal(pattern, reach)
