@@ -21,7 +21,8 @@ Back-ends
     scikit-sparse is absent, for the real factorizations of the eigensolver, which makes
     dozens to hundreds of solves per factorization: cholespy's solves are 3-4x faster than
     SuperLU's, its factorization up to 1.7x slower (see below), so one-off solves keep
-    SuperLU.
+    SuperLU.  (On an indefinite matrix its CHOLMOD prints a warning to stderr before
+    ``NotPositiveDefiniteError`` is raised.)
 ``"superlu"``
     SciPy SuperLU, general mode (``COLAMD`` ordering, partial pivoting) for
     non-Hermitian and indefinite matrices.  Keeps float32/complex64.
