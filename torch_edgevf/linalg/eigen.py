@@ -372,19 +372,9 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
     return theta, X, n_op + S.shape[0]
 
 
-def _rayleigh_ritz(A, M, X, mdiag=None):
-    """Eigenpairs of the projected pencil ``(X^H A X, X^H M X)``, ascending.
-
-    ``mdiag``: the diagonal of ``M`` when it is diagonal (then ``M X`` is a row scaling).
-    The projections are BLAS ``gemm`` calls with the conjugate transpose inside BLAS
-    (no conjugated copy of ``X``).
-    """
-    X = np.asfortranarray(X)
-    gemm = get_blas_funcs("gemm", dtype=X.dtype)
-    trans = 2 if X.dtype.kind == "c" else 1
-    MX = X * mdiag[:, None] if mdiag is not None else M @ X
-    ha = gemm(1.0, X, np.asfortranarray(A @ X), trans_a=trans)
-    hm = gemm(1.0, X, np.asfortranarray(MX), trans_a=trans)
+def _rayleigh_ritz(A, M, X):
+    """Eigenpairs of the projected pencil ``(X^H A X, X^H M X)``, ascending."""
+    ha, hm = X.conj().T @ (A @ X), X.conj().T @ (M @ X)
     lam, C = scipy.linalg.eigh((ha + ha.conj().T) / 2, (hm + hm.conj().T) / 2)
     return lam, X @ C
 
@@ -522,7 +512,7 @@ def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
                               v0=start)
     logger.debug("Lanczos: %d solves for k=%d", n_op, k)
     X = Y / s[:, None] if s is not None else Y
-    return (*_rayleigh_ritz(A, M, X, mdiag if s is not None else None), factor)
+    return (*_rayleigh_ritz(A, M, X), factor)
 
 
 class _Eigsh(torch.autograd.Function):
