@@ -40,7 +40,17 @@ def diagonal(values: torch.Tensor) -> torch.Tensor:
 
 
 class _OnDevice:
-    """Index tensors kept on the CPU and copied once to each other device they are used on."""
+    """A fixed sparsity pattern: index tensors kept on the CPU and copied once to each other
+    device they are used on."""
+
+    @property
+    def indices(self) -> torch.Tensor:
+        """(2, nnz) int64 row and column indices, sorted lexicographically."""
+        return self._indices
+
+    def _check_contributions(self, values: torch.Tensor) -> None:
+        if values.shape[0] != self.num_contributions:
+            raise ValueError(f"expected {self.num_contributions} contributions, got {values.shape[0]}")
 
     def _host(self) -> tuple[torch.Tensor, ...]:
         raise NotImplementedError
@@ -87,17 +97,9 @@ class Pattern(_OnDevice):
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, self._first, self._rest_src, self._rest_dst)
 
-    @property
-    def indices(self) -> torch.Tensor:
-        """(2, nnz) int64 row and column indices, sorted lexicographically."""
-        return self._indices
-
     def assemble(self, values: torch.Tensor) -> torch.Tensor:
         """Sum ``values`` (one per contribution) into a coalesced sparse COO tensor."""
-        if values.shape[0] != self.num_contributions:
-            raise ValueError(
-                f"expected {self.num_contributions} contributions, got {values.shape[0]}"
-            )
+        self._check_contributions(values)
         indices, first, rest_src, rest_dst = self._tensors(values.device)
         out = values.index_select(0, first)
         if rest_src.numel():
@@ -223,11 +225,6 @@ class EdgePairPattern(_OnDevice):
             torch.from_numpy(np.ascontiguousarray(diag_src[:, side]).astype(_index_dtype(3 * nf + 1), copy=False))
             for side in (0, 1)
         )
-
-    @property
-    def indices(self) -> torch.Tensor:
-        """(2, nnz) int64 row and column indices, sorted lexicographically."""
-        return self._indices
 
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, self._gather) + self._diag
@@ -414,18 +411,12 @@ class EdgeVertexPattern(_OnDevice):
         self.nnz = int(indices.shape[1])
         self.num_contributions = 9 * nf
 
-    @property
-    def indices(self) -> torch.Tensor:
-        """(2, nnz) int64 row and column indices, sorted lexicographically."""
-        return self._indices
-
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, *self._sources)
 
     def assemble(self, values: torch.Tensor) -> torch.Tensor:
         """Sparse COO from the ``(9 F,)`` pair-major face contributions."""
-        if values.shape[0] != self.num_contributions:
-            raise ValueError(f"expected {self.num_contributions} contributions, got {values.shape[0]}")
+        self._check_contributions(values)
         indices, *sources = self._tensors(values.device)
         return sparse_coo(indices, _gather_sum(values, *sources), self.shape)
 
@@ -476,18 +467,12 @@ class VertexPairPattern(_OnDevice):
         self.nnz = int(gather.shape[0])
         self.num_contributions = 9 * nf
 
-    @property
-    def indices(self) -> torch.Tensor:
-        """(2, nnz) int64 row and column indices, sorted lexicographically."""
-        return self._indices
-
     def _host(self) -> tuple[torch.Tensor, ...]:
         return (self._indices, self._gather, self._diag_rows, self._diag_src, *self._pairs)
 
     def assemble(self, values: torch.Tensor) -> torch.Tensor:
         """Sparse COO from the ``(9 F,)`` face-major pair contributions."""
-        if values.shape[0] != self.num_contributions:
-            raise ValueError(f"expected {self.num_contributions} contributions, got {values.shape[0]}")
+        self._check_contributions(values)
         indices, gather, diag_rows, diag_src, *pairs = self._tensors(values.device)
         diag = values.new_zeros(self.shape[0]).index_add(0, diag_rows, values.index_select(0, diag_src))
         off = _gather_sum(values, *pairs)
