@@ -332,9 +332,19 @@ def test_eigenvalue_gradient_through_sparse_matrix_constructor():
 
 @pytest.fixture
 def no_cholmod(monkeypatch):
-    """The factor module with scikit-sparse hidden and cholespy installed (else skip)."""
-    pytest.importorskip("cholespy")
+    """The factor module with scikit-sparse hidden and cholespy installed (else skip).
+
+    Skipped where scikit-sparse's CHOLMOD can be loaded: with both CHOLMOD builds in one process
+    (Debian's, through scikit-sparse, and the one cholespy bundles and exports) about half of
+    the full runs aborted with heap corruption at interpreter exit, and none without cholespy.
+    The library never loads both (CHOLMOD first, cholespy only without it); CI runs these tests
+    in a second process with ``EDGEVF_HIDE_CHOLMOD=1`` (see ``conftest.py``).
+    """
     from torch_edgevf.linalg import factor as factor_module
+
+    if factor_module.cholmod_module() is not None:
+        pytest.skip("scikit-sparse is loadable: cholespy tests run in a process without it (EDGEVF_HIDE_CHOLMOD=1)")
+    pytest.importorskip("cholespy")
 
     monkeypatch.setattr(factor_module, "cholmod_module", lambda: None)
     return factor_module
