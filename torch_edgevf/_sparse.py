@@ -9,6 +9,7 @@ tensor, with no sort, and autograd flows through it.
 
 from __future__ import annotations
 
+import functools
 import sys
 
 import numpy as np
@@ -236,45 +237,33 @@ class EdgePairPattern(_OnDevice):
         ``k``); columns are written straight into the value buffer. ``lower=None`` means
         ``conj(upper)``: a Hermitian operator (``upper`` itself for a real one).
         """
-        terms = [t for t in (diag, upper, lower) if t is not None]
+        def columns(t):
+            return None if t is None else list(t) if isinstance(t, (list, tuple)) else list(t.unbind(1))
+
+        up_cols, low_cols = columns(upper), columns(lower)
         if isinstance(diag, (list, tuple)):
             diag = torch.stack(diag, dim=1)
-        columns = [t for t in (upper, lower) if isinstance(t, (list, tuple))]
-        first = columns[0][0] if columns else upper
-        device = first.device
+        pieces = [diag, *up_cols, *(low_cols or [])]
+        dtype = functools.reduce(torch.promote_types, (p.dtype for p in pieces))
+        device = diag.device
         indices, gather, side0, side1 = self._tensors(device)
         ne, nf = self.shape[0], self._num_faces
-        dtype = diag.dtype
-        for t in (upper, lower):
-            for piece in (t if isinstance(t, (list, tuple)) else [t] if t is not None else []):
-                dtype = torch.promote_types(dtype, piece.dtype)
         flat = diag.reshape(-1)
         if not self._closed:
             flat = torch.cat([flat, flat.new_zeros(1)])
         on_diag = flat.index_select(0, side0) + flat.index_select(0, side1)
-        tracked = torch.is_grad_enabled() and any(
-            piece.requires_grad for t in terms for piece in (t if isinstance(t, (list, tuple)) else [t])
-        )
-
-        def face_major(t):
-            return (torch.stack(list(t), dim=1) if isinstance(t, (list, tuple)) else t).reshape(-1).to(dtype)
-
-        if tracked:
-            up = face_major(upper)
-            low = up.conj() if lower is None else face_major(lower)
+        if torch.is_grad_enabled() and any(p.requires_grad for p in pieces):
+            up = torch.stack(up_cols, dim=1).reshape(-1).to(dtype)
+            low = up.conj() if low_cols is None else torch.stack(low_cols, dim=1).reshape(-1).to(dtype)
             values = torch.cat([on_diag.to(dtype), up, low])
-        else:  # one buffer, filled in place: no concatenation, no stacked or conjugated copy
+        else:  # one buffer, filled column by column: no concatenation, no stacked or conjugated copy
             values = torch.empty(ne + 6 * nf, dtype=dtype, device=device)
             values[:ne] = on_diag
             up, low = values[ne:ne + 3 * nf], values[ne + 3 * nf:]
-            for t, out in ((upper, up), (lower, low)):
-                if isinstance(t, (list, tuple)):
-                    out = out.view(nf, 3)
-                    for k in range(3):
-                        out[:, k] = t[k]
-                elif t is not None:
-                    out.copy_(t.reshape(-1))
-            if lower is None:
+            for cols, out in ((up_cols, up), (low_cols, low)):
+                for k, col in enumerate(cols or []):
+                    out.view(nf, 3)[:, k] = col
+            if low_cols is None:
                 if dtype.is_complex:
                     torch.conj_physical(up, out=low)
                 else:
