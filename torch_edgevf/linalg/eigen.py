@@ -520,10 +520,9 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
     return theta, X, n_op + S.shape[0]
 
 
-def _rayleigh_ritz(A, M, X, mdiag=None):
-    """Eigenpairs of the projected pencil ``(X^H A X, X^H M X)``, ascending (``mdiag``: M's diagonal if M is)."""
-    MX = M @ X if mdiag is None else X * mdiag[:, None]
-    ha, hm = X.conj().T @ (A @ X), X.conj().T @ MX
+def _rayleigh_ritz(A, M, X):
+    """Eigenpairs of the projected pencil ``(X^H A X, X^H M X)``, ascending."""
+    ha, hm = X.conj().T @ (A @ X), X.conj().T @ (M @ X)
     lam, C = scipy.linalg.eigh((ha + ha.conj().T) / 2, (hm + hm.conj().T) / 2)
     return lam, X @ C
 
@@ -660,8 +659,17 @@ def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
                               ncv=ncv or max(3 * k, 2 * k + 2 * max_block), tol=tol, maxiter=maxiter,
                               v0=start)
     logger.debug("Lanczos: %d solves for k=%d", n_op, k)
-    X = Y / s[:, None] if s is not None else Y
-    return (*_rayleigh_ritz(A, M, X, mdiag if s is not None else None), factor)
+    if s is None:
+        return (*_rayleigh_ritz(A, M, Y), factor)
+    # Rayleigh-Ritz in the scaled coordinates, with the matrix already at hand: for X =
+    # S^-1 Y, X^H A X = Y^H (K + sigma I) Y and X^H M X = Y^H Y (K: the scaled S^-1 (A -
+    # sigma M) S^-1); no new (n, k) arrays but the result
+    G = inner.gram(Y)
+    ha = Y.conj().T @ (K @ Y) + sigma * G
+    lam, C = scipy.linalg.eigh((ha + ha.conj().T) / 2, (G + G.conj().T) / 2)
+    X = inner.gemm(1.0, Y, C)
+    X /= s[:, None]
+    return lam, X, factor
 
 
 class _Eigsh(torch.autograd.Function):
