@@ -7,7 +7,8 @@ Run from the repository root::
 
 For icosphere ``--level`` and ``--mesh`` (default: the shared Spot), with the connection
 Laplacian ``L_c`` and mass ``M_z`` of ``EdgeOperators(v, f)``, and for each back-end
-(CHOLMOD when scikit-sparse is installed, and the pip-only SuperLU path) it times
+(CHOLMOD when scikit-sparse is installed, cvxopt's bundled CHOLMOD when cvxopt is
+installed, and the pip-only SuperLU path) it times
 
 * factor + one solve of ``M_z + L_c`` vs ``scipy.sparse.linalg.spsolve``;
 * the ``k`` smallest eigenpairs of ``(L_c, M_z)`` vs ``scipy.sparse.linalg.eigsh(A, k, M,
@@ -111,12 +112,16 @@ def bench(name, verts, faces, k, repeats, rows):
     res0 = residual(A, M, w0, X0)
     rows.append((label, "-", f"scipy eigsh, default tol=0 (res {res0:.1e})", t_scipy0, None, None, None))
 
-    for backend in ("cholmod", "superlu"):
+    for backend in ("cholmod", "cvxopt", "superlu"):
         if backend == "cholmod" and factor_module.cholmod_module() is None:
             continue
-        saved = factor_module.cholmod_module
-        if backend == "superlu":
+        if backend == "cvxopt" and factor_module.cvxopt_cholmod_module() is None:
+            continue
+        saved = factor_module.cholmod_module, factor_module.cvxopt_cholmod_module
+        if backend != "cholmod":
             factor_module.cholmod_module = lambda: None
+        if backend == "superlu":
+            factor_module.cvxopt_cholmod_module = lambda: None
         try:
             fac = interleaved({"factor": lambda: SparseSolver(K_t),
                                "eig1": lambda: eigsh(L, Mz, 1, method="lanczos")}, max(reps, repeats + 1))
@@ -153,7 +158,7 @@ def bench(name, verts, faces, k, repeats, rows):
             t_ebwd = interleaved({"b": lambda: torch.autograd.grad(pairs.values.sum(), (lv, mv), retain_graph=True)},
                                  3)["b"][0]
         finally:
-            factor_module.cholmod_module = saved
+            factor_module.cholmod_module, factor_module.cvxopt_cholmod_module = saved
         eig_err = float(np.abs(np.sort(w_ref) - lam.numpy()).max() / abs(w_ref).max())
         err1 = abs(float(lam1[0]) - float(lam[0])) / abs(float(lam[0]))
         assert err1 <= 1e-10, err1

@@ -7,11 +7,16 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-if os.environ.get("EDGEVF_HIDE_CHOLMOD"):  # test the pip-only / cholespy back-ends in this process
+if os.environ.get("EDGEVF_HIDE_CHOLMOD"):  # test the pip-only / cholespy / cvxopt back-ends in this process
     import sys
 
     sys.modules["sksparse"] = None
     sys.modules["sksparse.cholmod"] = None
+if os.environ.get("EDGEVF_HIDE_CVXOPT"):  # cvxopt's bundled CHOLMOD never beside cholespy's
+    import sys
+
+    sys.modules["cvxopt"] = None
+    sys.modules["cvxopt.cholmod"] = None
 
 from pathlib import Path  # noqa: E402
 

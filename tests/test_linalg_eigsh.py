@@ -433,6 +433,7 @@ def no_cholmod(monkeypatch):
     pytest.importorskip("cholespy")
 
     monkeypatch.setattr(factor_module, "cholmod_module", lambda: None)
+    monkeypatch.setattr(factor_module, "cvxopt_cholmod_module", lambda: None)
     return factor_module
 
 

@@ -26,6 +26,7 @@ def backend(request, monkeypatch):
         pytest.importorskip("sksparse.cholmod")
     else:
         monkeypatch.setattr(factor_module, "cholmod_module", lambda: None)
+        monkeypatch.setattr(factor_module, "cvxopt_cholmod_module", lambda: None)
     return request.param
 
 
@@ -172,6 +173,7 @@ def test_missing_cholmod_logs_once(monkeypatch, caplog):
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", fake_import)
+    monkeypatch.setattr(factor_module, "cvxopt_cholmod_module", lambda: None)
     factor_module.cholmod_module.cache_clear()
     try:
         with caplog.at_level(logging.INFO, logger=factor_module.__name__):

@@ -84,6 +84,17 @@ def cholmod_module():
 
 
 @functools.lru_cache(maxsize=None)
+def cvxopt_cholmod_module():
+    """``cvxopt.cholmod`` if installed (and not hidden, see the test set-up), else ``None``."""
+    try:
+        import cvxopt
+        from cvxopt import cholmod
+    except ImportError:
+        return None
+    return cvxopt, cholmod
+
+
+@functools.lru_cache(maxsize=None)
 def cholespy_module():
     """``cholespy`` if installed, else ``None``."""
     try:
@@ -207,6 +218,53 @@ class _CholespyFactor(_Factor):
         return x.astype(np.result_type(b, self.dtype), copy=False)
 
 
+class _CvxoptCholmodFactor(_Factor):
+    """CHOLMOD as bundled by cvxopt's PyPI wheels (real or complex, double precision).
+
+    ``simplicial=True`` (the iterative solvers' many solves) gives :math:`LDL^H`, whose
+    pivots ``D`` -- read with one diagonal solve -- certify positive definiteness;
+    otherwise the supernodal :math:`LL^H`, which raises on a non positive definite
+    matrix and factors 2-2.5x faster on large meshes (icosphere 6 edges: 0.41 s against
+    0.99 s) while solving 1.4-1.7x slower.
+    """
+
+    backend = "cholmod-cvxopt"
+    hermitian = True
+
+    def __init__(self, K: sp.csc_matrix, cvxopt, cholmod, simplicial: bool = True):
+        super().__init__(K)
+        self._cvxopt, self._cholmod = cvxopt, cholmod
+        self._complex = np.iscomplexobj(K.data)
+        self._tc = "z" if self._complex else "d"
+        low = sp.tril(K, format="coo")
+        data = low.data.astype(np.complex128 if self._complex else np.float64, copy=False)
+        A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(data)), cvxopt.matrix(low.row.astype(np.int64)),
+                            cvxopt.matrix(low.col.astype(np.int64)), K.shape, self._tc)
+        cholmod.options["supernodal"] = 0 if simplicial else 2
+        try:
+            self._f = cholmod.symbolic(A, uplo="L")
+            cholmod.numeric(A, self._f)
+        except ArithmeticError as err:
+            raise NotPositiveDefiniteError("the matrix is not positive definite") from err
+        finally:
+            cholmod.options.pop("supernodal", None)
+        if simplicial:
+            inv_d = cvxopt.matrix(np.ones(self.n, dtype=np.complex128 if self._complex else np.float64))
+            cholmod.solve(self._f, inv_d, sys=6)  # D x = 1: x = 1 / d
+            inv_d = np.array(inv_d)[:, 0]
+            if not (np.all(np.isfinite(inv_d)) and np.all(inv_d.real > 0)
+                    and np.all(np.abs(inv_d.imag) <= 1e-8 * inv_d.real)):
+                raise NotPositiveDefiniteError("the matrix is not positive definite")
+
+    def _solve(self, b, adjoint):
+        wide = np.complex128 if self._complex else np.float64
+        B = self._cvxopt.matrix(np.asfortranarray(b.reshape(self.n, -1), dtype=wide))
+        self._cholmod.solve(self._f, B)
+        x = np.array(B)
+        x = x if b.ndim == 2 else x[:, 0]
+        return x.astype(np.result_type(b, self.dtype), copy=False)
+
+
 def factorize(K: sp.spmatrix, method: str = "auto", hermitian: bool | None = None,
               many_solves: bool = False) -> _Factor:
     """Factor the SciPy matrix ``K`` with the best available back-end.
@@ -246,6 +304,9 @@ def _cholesky(K: sp.csc_matrix, many_solves: bool = False) -> _Factor:
     cholmod = cholmod_module()
     if cholmod is not None:
         return _CholmodFactor(K, cholmod)
+    cvx = cvxopt_cholmod_module()
+    if cvx is not None:
+        return _CvxoptCholmodFactor(K, *cvx, simplicial=many_solves)
     if many_solves and not np.iscomplexobj(K.data):
         cholespy = cholespy_module()
         if cholespy is not None:
