@@ -81,9 +81,20 @@ def test_gradcheck_solve(fm):
 
 
 @pytest.mark.parametrize("k", [1, 6])
-def test_eigsh_matches_dense(fm, k):
+def test_eigsh_matches_dense(fm, k, monkeypatch):
+    """k > 1 (many solves) factors simplicial LDL^H, the smallest pair supernodal LL^H."""
+    made = []
+    base = fm._CvxoptCholmodFactor
+
+    class Recorded(base):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(fm, "_CvxoptCholmodFactor", Recorded)
     p = grid_laplacian(9, 11, torch.complex128, magnetic=True, shift=0.05)
     lam, X = eigsh(p.A, p.m, k, method="lanczos")
+    assert [f.simplicial for f in made] == [k > 1]
     ref = scipy.linalg.eigh(p.A.to_dense().numpy(), np.diag(p.m.numpy()), subset_by_index=[0, k - 1])[0]
     np.testing.assert_allclose(lam.numpy(), ref, rtol=1e-11)
     Md = torch.diag(p.m).to(X.dtype)

@@ -501,7 +501,8 @@ def cholespy_factors(no_cholmod, monkeypatch):
 def test_eigsh_with_cholespy_matches_dense_eigh(k, cholespy_factors):
     p = grid_laplacian(8, 9, torch.float64, shift=0.05)
     lam, X = eigsh(p.A, p.m, k, method="lanczos")
-    assert len(cholespy_factors) == 1
+    # the smallest pair (10-20 solves) keeps SuperLU's cheaper factorization
+    assert len(cholespy_factors) == (1 if k > 1 else 0)
     ref_lam, ref_X = reference(p, k)
     np.testing.assert_allclose(lam.numpy(), ref_lam, rtol=1e-12)
     Md = torch.diag(p.m)

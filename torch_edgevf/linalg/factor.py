@@ -15,6 +15,14 @@ Back-ends
     :math:`LDL^H` factorization, so positive definiteness is checked on the pivots.  It
     is the Cholesky path when scikit-sparse is not installed (pip-only installs), and is
     2.2x faster than SuperLU's default mode on the connection Laplacian.
+``"cholmod-cvxopt"``
+    CHOLMOD as bundled by cvxopt's PyPI wheels (optional extra ``torch_edgevf[cvxopt]``, no
+    system library; cvxopt is GPL-3 licensed), real and complex Hermitian, used when
+    scikit-sparse is absent: simplicial :math:`LDL^H` for the iterative solvers' many
+    solves (positive definiteness checked on ``D``), supernodal :math:`LL^H` for one-off
+    factorizations.  On Spot's :math:`L_c - \sigma M_z` it factors in 0.076 s (simplicial)
+    against 0.113 s for SuperLU symmetric mode and solves two columns in 4.9 ms against
+    5.95 ms; on icosphere 6 edges, 0.41 s (supernodal) against 0.97 s.
 ``"cholespy"``
     CHOLMOD as bundled by cholespy (optional extra ``torch_edgevf[cholespy]``, PyPI wheels,
     no system library), real symmetric positive definite matrices only.  Used, when
@@ -234,6 +242,7 @@ class _CvxoptCholmodFactor(_Factor):
     def __init__(self, K: sp.csc_matrix, cvxopt, cholmod, simplicial: bool = True):
         super().__init__(K)
         self._cvxopt, self._cholmod = cvxopt, cholmod
+        self.simplicial = simplicial
         self._complex = np.iscomplexobj(K.data)
         self._tc = "z" if self._complex else "d"
         low = sp.tril(K, format="coo")
@@ -342,7 +351,8 @@ class SparseSolver:
     Attributes
     ----------
     backend : str
-        ``"cholmod"``, ``"superlu-hermitian"`` or ``"superlu"`` (``"cholespy"`` only in the eigensolver).
+        ``"cholmod"``, ``"cholmod-cvxopt"``, ``"superlu-hermitian"`` or ``"superlu"`` (``"cholespy"``
+        only in the eigensolver).
     hermitian : bool
 
     Examples
