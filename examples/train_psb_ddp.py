@@ -121,6 +121,10 @@ def _worker(rank: int, world_size: int, port: int, cfg: dict, out_path: str) -> 
                       "params_in_sync": bool(in_sync), "test_accuracy": tp.evaluate(model, test_set),
                       "num_train": len(train_set), "num_test": len(test_set)}
             Path(out_path).write_text(json.dumps(result))
+        # tear down together: a rank that destroyed its process group while rank 0 (which
+        # hosts the TCP store) was still evaluating aborted now and then in gloo's teardown
+        # ("terminate called without an active exception", about 1 run in 8)
+        dist.barrier()
     finally:
         dist.destroy_process_group()
 
