@@ -40,6 +40,20 @@ def load_example(name: str):
     return module
 
 
+def record_instances(monkeypatch, module, name: str) -> list:
+    """Replace the class ``module.<name>`` by a subclass that records each instance made."""
+    made = []
+    base = getattr(module, name)
+
+    class Recorded(base):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(module, name, Recorded)
+    return made
+
+
 def shared_mesh(name: str):
     """Load ``../shared/meshes/<name>`` (merged), or skip when the folder is absent."""
     path = SHARED / "meshes" / name

@@ -10,6 +10,7 @@ import pytest
 import scipy.sparse
 import scipy.sparse.linalg as sla
 import torch
+from conftest import record_instances
 from test_linalg_problems import grid_laplacian
 
 from torch_edgevf.linalg import SparseSolver, eigsh, solve
@@ -83,15 +84,7 @@ def test_gradcheck_solve(fm):
 @pytest.mark.parametrize("k", [1, 6])
 def test_eigsh_matches_dense(fm, k, monkeypatch):
     """k > 1 (many solves) factors simplicial LDL^H, the smallest pair supernodal LL^H."""
-    made = []
-    base = fm._CvxoptCholmodFactor
-
-    class Recorded(base):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            made.append(self)
-
-    monkeypatch.setattr(fm, "_CvxoptCholmodFactor", Recorded)
+    made = record_instances(monkeypatch, fm, "_CvxoptCholmodFactor")
     p = grid_laplacian(9, 11, torch.complex128, magnetic=True, shift=0.05)
     lam, X = eigsh(p.A, p.m, k, method="lanczos")
     assert [f.simplicial for f in made] == [k > 1]

@@ -5,6 +5,7 @@ import pytest
 import scipy.linalg
 import scipy.sparse
 import torch
+from conftest import record_instances
 from test_linalg_problems import grid_laplacian
 
 from torch_edgevf.linalg import eigsh
@@ -485,16 +486,7 @@ def test_cholespy_missing_is_logged_once(no_cholmod, monkeypatch, caplog):
 @pytest.fixture
 def cholespy_factors(no_cholmod, monkeypatch):
     """Records every cholespy factorization made while the test runs."""
-    made = []
-    base = no_cholmod._CholespyFactor
-
-    class Recorded(base):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            made.append(self)
-
-    monkeypatch.setattr(no_cholmod, "_CholespyFactor", Recorded)
-    return made
+    return record_instances(monkeypatch, no_cholmod, "_CholespyFactor")
 
 
 @pytest.mark.parametrize("k", [1, 5])
