@@ -312,9 +312,7 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
         H[:cols, cols - b: cols] = C
         grow = False
         if cols >= k:
-            theta, S = scipy.linalg.eigh((H[:cols, :cols] + H[:cols, :cols].conj().T) / 2)
-            theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
-            coupling = R @ S[cols - b: cols]
+            theta, S, coupling = _ritz(H, cols, b, R)
             resid = np.linalg.norm(coupling, axis=0)
             grow = b < max_block and _largest_cluster(theta[:k], resid[:k], tol) >= b
             if not grow and n_op >= settle and np.all(resid[:k] <= tol * np.abs(theta[:k])):
@@ -333,9 +331,7 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
             Q, C, R = _complete(Q, C, R, V[:, :cols], inner, rng, out=slot)
             H[:cols, cols - b: cols] = C
             pending = False
-            theta, S = scipy.linalg.eigh((H[:cols, :cols] + H[:cols, :cols].conj().T) / 2)
-            theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
-            coupling = R @ S[cols - b: cols]
+            theta, S, coupling = _ritz(H, cols, b, R)
         nb = max_block if grow else b
         q = min(max(p, k), m - nb, cols)
         _rotate(V, cols, S, q)
@@ -352,6 +348,14 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
             b = nb
         cols, lo = q + b, 0
     return theta[:k], inner.gemm(1.0, V[:, :cols], S[:, :k]), n_op
+
+
+def _ritz(H, cols, b, R):
+    """Ritz values (descending), vectors of the projected ``H[:cols, :cols]``, and their coupling
+    ``R S_last`` to the next block (its column norms are the Ritz residuals)."""
+    theta, S = scipy.linalg.eigh((H[:cols, :cols] + H[:cols, :cols].conj().T) / 2)
+    theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
+    return theta, S, R @ S[cols - b: cols]
 
 
 def _sq_norms(C):
@@ -388,16 +392,26 @@ def _local_pass(W, Vl, inner: _Inner, rng, out=None):
     squared norm (a near breakdown: what is left may be mostly rounding error, which
     only the full procedure handles).
     """
+    W, C, G, breakdown = _against_last_blocks(W, Vl, inner)
+    if breakdown:
+        inner.subtract(W, Vl, -C)
+        return None
+    Q, _, R = _orthonormalize(W, Vl[:, :0], inner, rng, out=out, gram=G)
+    return Q, C, R
+
+
+def _against_last_blocks(W, Vl, inner: _Inner):
+    """One Gram-Schmidt pass of ``W`` against ``Vl``: ``(W - Vl C, C, its Gram matrix, breakdown)``.
+
+    ``breakdown``: some column lost more than ``1 - 1e-8`` of its squared norm (by
+    Pythagoras, the norm before is the norm after plus that of ``C``).
+    """
     W = np.asfortranarray(W, dtype=inner.dtype)
     C = inner.dot(Vl, W)
     W = inner.subtract(W, Vl, C)
     G = inner.gram(W)
     after = G.diagonal().real
-    if np.any(after <= _CANCELLATION * (after + _sq_norms(C))):  # (Pythagoras: ||W||^2 before)
-        inner.subtract(W, Vl, -C)
-        return None
-    Q, _, R = _orthonormalize(W, Vl[:, :0], inner, rng, out=out, gram=G)
-    return Q, C, R
+    return W, C, G, bool(np.any(after <= _CANCELLATION * (after + _sq_norms(C))))
 
 
 def _deferred_pass(W, V, H, cols, b, lo, inner: _Inner, rng, out=None):
@@ -421,13 +435,8 @@ def _deferred_pass(W, V, H, cols, b, lo, inner: _Inner, rng, out=None):
     :func:`_orthonormalize` does, with ``C`` the new column block of ``H``.
     """
     p = cols - b
-    Vl = V[:, lo: cols]
-    W = np.asfortranarray(W, dtype=inner.dtype)
-    Cl = inner.dot(Vl, W)
-    W = inner.subtract(W, Vl, Cl)
-    G = inner.gram(W)
-    before = G.diagonal().real.copy()
-    breakdown = np.any(before <= _CANCELLATION * (before + _sq_norms(Cl)))
+    W, Cl, G, breakdown = _against_last_blocks(W, V[:, lo: cols], inner)
+    before = G.diagonal().real
     X = np.empty((W.shape[0], 2 * b), dtype=inner.dtype, order="F")
     X[:, :b] = V[:, p: cols]
     X[:, b:] = W
@@ -669,7 +678,7 @@ def _shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
     # sigma M) S^-1); no new (n, k) arrays but the result
     G = inner.gram(Y)
     ha = Y.conj().T @ (K @ Y) + sigma * G
-    lam, C = scipy.linalg.eigh((ha + ha.conj().T) / 2, (G + G.conj().T) / 2)
+    lam, C = scipy.linalg.eigh((ha + ha.conj().T) / 2, G)  # (gram() is Hermitian already)
     X = inner.gemm(1.0, Y, C)
     X /= s[:, None]
     return lam, X, factor
