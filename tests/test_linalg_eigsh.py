@@ -514,3 +514,91 @@ def test_gradcheck_eigsh_with_cholespy(cholespy_factors):
 
     assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
     assert cholespy_factors
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.complex128])
+def test_inner_products_narrow_and_wide_blocks_match_numpy(dtype):
+    """The gemv branches (one or two columns) and the gemm branch agree with plain NumPy."""
+    from torch_edgevf.linalg import eigen
+
+    rng = np.random.default_rng(3)
+    n = 57
+
+    def rand(*shape):
+        x = rng.standard_normal(shape)
+        return np.asfortranarray(x + 1j * rng.standard_normal(shape) if dtype == np.complex128 else x)
+
+    m = rng.uniform(0.5, 2.0, n)
+    for mmul in (None, lambda W: np.asfortranarray(m[:, None] * W)):
+        inner = eigen._Inner(dtype, mmul=mmul)
+        weight = np.ones(n) if mmul is None else m
+        for cols in (1, 2, 3, 7):
+            for b in (1, 2, 4):
+                V, W, C = rand(n, cols), rand(n, b), rand(cols, b)
+                np.testing.assert_allclose(inner.dot(V, W), V.conj().T @ (weight[:, None] * W), rtol=1e-13, atol=1e-12)
+                expected = W - V @ C
+                out = inner.subtract(W, V, C)
+                np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-12)
+                if b <= 2:  # in place on a Fortran-ordered block
+                    assert np.shares_memory(out, W)
+                np.testing.assert_allclose(inner.combine(V, C), V @ C, rtol=1e-13, atol=1e-12)
+        # an empty basis
+        assert inner.dot(rand(n, 0), rand(n, 1)).shape == (0, 1)
+        W = rand(n, 1)
+        np.testing.assert_array_equal(inner.subtract(W.copy(), rand(n, 0), np.zeros((0, 1), dtype)), W)
+
+
+@pytest.mark.parametrize("size", [1, 2, 9])
+def test_tridiagonal_eigh_matches_dense(size):
+    from torch_edgevf.linalg import eigen
+
+    rng = np.random.default_rng(size)
+    d, e = rng.standard_normal(size), rng.standard_normal(max(size - 1, 1))
+    theta, S = eigen._tridiagonal_eigh(d, e)
+    T = np.diag(d) + np.diag(e[: size - 1], 1) + np.diag(e[: size - 1], -1)
+    ref = np.linalg.eigvalsh(T)[::-1]
+    np.testing.assert_allclose(theta, ref, rtol=1e-13, atol=1e-13)
+    assert np.all(np.diff(theta) <= 0)  # descending
+    np.testing.assert_allclose(T @ S, S * theta, atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.complex128])
+@pytest.mark.parametrize("full_diagonal", [True, False])
+def test_scaled_shifted_matrix(dtype, full_diagonal):
+    """D (A - sigma M) D from the CSR arrays equals the dense formula, with or without
+    a stored entry on every diagonal position."""
+    from torch_edgevf.linalg import eigen
+
+    rng = np.random.default_rng(4)
+    n = 30
+    B = scipy.sparse.random(n, n, density=0.15, random_state=5, dtype=np.float64)
+    if dtype == np.complex128:
+        B = B + 1j * scipy.sparse.random(n, n, density=0.15, random_state=6)
+    A = (B + B.conj().T).tocsr()
+    if full_diagonal:
+        A = (A + scipy.sparse.identity(n)).tocsr()
+    else:  # drop the stored diagonal of a few rows
+        A = A.tolil()
+        A.setdiag(0.0)
+        A = (A + scipy.sparse.diags(np.r_[np.ones(n - 5), np.zeros(5)])).tocsr()
+        A.eliminate_zeros()
+    A.sort_indices()
+    m = rng.uniform(0.5, 2.0, n)
+    sigma = -0.3
+    K = eigen._scaled_shifted(A, 1 / np.sqrt(m), sigma)
+    assert K.format == "csc"
+    D = np.diag(1 / np.sqrt(m))
+    np.testing.assert_allclose(K.toarray(), D @ (A.toarray() - sigma * np.diag(m)) @ D, rtol=1e-14, atol=1e-14)
+
+
+def test_to_scipy_is_the_coalesced_matrix():
+    from torch_edgevf.linalg._utils import as_sparse
+
+    p = grid_laplacian(4, 5, torch.complex128)
+    A = as_sparse(p.A).to_scipy()
+    assert A.format == "csr" and A.has_canonical_format
+    np.testing.assert_array_equal(A.toarray(), p.A.to_dense().numpy())
+    # an empty row (and column) at either end
+    idx = torch.tensor([[1, 1, 2], [1, 2, 2]])
+    B = torch.sparse_coo_tensor(idx, torch.tensor([1.0, 2.0, 3.0]), (4, 4))
+    np.testing.assert_array_equal(as_sparse(B).to_scipy().toarray(), B.to_dense().numpy())

@@ -55,11 +55,17 @@ class SparseData:
     def is_diagonal(self) -> bool:
         return bool(torch.equal(self.row, self.col))
 
-    def to_scipy(self) -> sp.csc_matrix:
-        """The matrix as a SciPy CSC matrix (detached, on the CPU, same dtype)."""
+    def to_scipy(self) -> sp.csr_matrix:
+        """The matrix as a SciPy CSR matrix (detached, on the CPU, same dtype).
+
+        Built directly from the coalesced (row-major, duplicate-free) indices: no sort,
+        a third of the time of SciPy's COO conversion.
+        """
         idx = self.indices.cpu().numpy()
-        vals = self.values.detach().cpu().resolve_conj().numpy()
-        return sp.csc_matrix((vals, (idx[0], idx[1])), shape=(self.n, self.n))
+        vals = self.values.detach().cpu().resolve_conj().resolve_neg().numpy()
+        indptr = np.zeros(self.n + 1, dtype=idx.dtype)
+        np.cumsum(np.bincount(idx[0], minlength=self.n), out=indptr[1:])
+        return sp.csr_matrix((vals, idx[1], indptr), shape=(self.n, self.n))
 
     def matmul(self, x: torch.Tensor) -> torch.Tensor:
         """Differentiable product ``A @ x`` for ``x`` of shape ``(n,)`` or ``(n, C)``."""
@@ -158,8 +164,17 @@ def complex_dtype(dtype: torch.dtype) -> torch.dtype:
 
 
 def check_finite(x: torch.Tensor, name: str) -> None:
-    """Raise ``ValueError`` if ``x`` holds NaN or Inf."""
-    if not bool(torch.isfinite(x.detach()).all()):
+    """Raise ``ValueError`` if ``x`` holds NaN or Inf.
+
+    On the CPU through NumPy: ``torch.isfinite`` on complex tensors is five times slower
+    (Spot's connection Laplacian, 173k entries: 1.6 against 0.3 ms).
+    """
+    x = x.detach()
+    if x.device.type == "cpu" and x.dtype in _FLOAT_DTYPES:
+        finite = bool(np.isfinite(x.resolve_conj().resolve_neg().numpy()).all())
+    else:
+        finite = bool(torch.isfinite(x).all())
+    if not finite:
         raise ValueError(f"{name} contains NaN or Inf")
 
 
