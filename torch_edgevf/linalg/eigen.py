@@ -595,15 +595,19 @@ def _better_of(Y, kmul, mmul=None):
         rho = np.vdot(y, ky).real / np.vdot(y, my).real
         res = np.linalg.norm(ky - rho * my) / max(abs(rho) * np.linalg.norm(my), np.finfo(float).tiny)
         logger.debug("smallest pair: residual %.2e (%s Ritz vector)", res, "harmonic" if i else "plain")
-        if best is None or res < best[0]:  # (a NaN residual never wins)
+        res = res if np.isfinite(res) else np.inf  # (a NaN residual never wins)
+        if best is None or res < best[0]:
             best = (res, y, ky)
     return best[1], best[2]
 
 
 def _tridiagonal_eigh(d, e):
     """Eigenpairs of the real symmetric tridiagonal matrix (diagonal ``d``, off-diagonal
-    ``e[:len(d) - 1]``; ``e`` has at least one entry), *descending*; LAPACK ``stev`` (a fifth of the time of ``eigh`` on the full
-    matrix at the sizes of the smallest-pair path, where it runs after every solve)."""
+    ``e[:len(d) - 1]``; ``e`` has at least one entry), *descending*.
+
+    LAPACK ``stev``: a fifth of the time of ``eigh`` on the full matrix at the sizes of the
+    smallest-pair path, where it runs after every solve.
+    """
     theta, S, info = _STEV(d, e, compute_v=1)
     if info != 0:  # (QL/QR did not converge: never seen; the dense solver then)
         e = e[: d.size - 1]
