@@ -143,21 +143,22 @@ class _Inner:
         """
         MW = W if self.mmul is None else self.mmul(W)
         if MW.shape[1] <= 2 and V.shape[1] and MW.dtype == self.dtype:
-            out = np.empty((V.shape[1], MW.shape[1]), dtype=self.dtype, order="F")
-            for i in range(MW.shape[1]):
-                out[:, i] = self.gemv(1.0, V, MW[:, i], trans=self.trans)
-            return out
+            return self._gemv_columns(V, MW, self.trans)
         return self.gemm(1.0, MW, V, trans_a=self.trans).conj().T
+
+    def _gemv_columns(self, V, X, trans=0):
+        """``op(V) X`` (``op``: none, or conjugate transpose for ``trans``), one ``gemv`` per column."""
+        out = np.empty((V.shape[1] if trans else V.shape[0], X.shape[1]), dtype=self.dtype, order="F")
+        for i in range(X.shape[1]):
+            out[:, i] = self.gemv(1.0, V, X[:, i], trans=trans)
+        return out
 
     def combine(self, V, S):
         """``V S`` as a new Fortran-ordered block (``gemv`` per column for one or two)."""
         S = np.asarray(S, dtype=self.dtype)
         if S.shape[1] > 2 or not V.shape[1]:
             return self.gemm(1.0, V, S)
-        out = np.empty((V.shape[0], S.shape[1]), dtype=self.dtype, order="F")
-        for i in range(S.shape[1]):
-            out[:, i] = self.gemv(1.0, V, S[:, i])
-        return out
+        return self._gemv_columns(V, S)
 
     def gram(self, W):
         G = self.dot(W, W)
@@ -708,13 +709,13 @@ def _scaled_shifted(A, mdiag, d, sigma):
     A = sp.csr_matrix(A)
     n = A.shape[0]
     rows = np.repeat(np.arange(n), np.diff(A.indptr))
-    scale = d[rows]
-    scale *= d[A.indices]
     on_diag = rows == A.indices
     if np.count_nonzero(on_diag) != n or not A.has_canonical_format:  # (a diagonal entry missing)
         K = (A - sigma * sp.diags(mdiag, format="csr")).tocsc()
         K.data *= d[K.indices] * np.repeat(d, np.diff(K.indptr))
         return K
+    scale = d[rows]
+    scale *= d[A.indices]
     data = A.data * scale
     diag = np.flatnonzero(on_diag)
     data[diag] = (A.data[diag] - sigma * mdiag) * scale[diag]
