@@ -346,6 +346,85 @@ def test_lanczos_deferred_pass_survives_invariant_subspaces(monkeypatch):
     assert sum(fallbacks) >= 2
 
 
+# ------------------------------------------------------- convergence test schedule
+
+
+def _counted_lanczos(monkeypatch, T, op, k, every_step):
+    """``_lanczos`` (block 2) with the convergence tests counted; ``every_step`` forces a test per step."""
+    from torch_edgevf.linalg import eigen
+
+    tests = []
+    ritz = eigen._ritz
+
+    def counted(H, cols, b, R):
+        tests.append(cols)
+        return ritz(H, cols, b, R)
+
+    monkeypatch.setattr(eigen, "_ritz", counted)
+    if every_step:
+        monkeypatch.setattr(eigen._TestSchedule, "due", lambda self, cols, n_op, b: True)
+    n = T.shape[0]
+    theta, Y, n_op = eigen._lanczos(op, eigen._Inner(np.complex128), n, k, block=2, ncv=3 * k, tol=1e-12,
+                                    maxiter=100, v0=np.random.default_rng(1).standard_normal(n))
+    monkeypatch.undo()
+    return theta, Y, n_op, tests
+
+
+def test_lanczos_spaces_its_tests_when_they_cost_more_than_steps(monkeypatch):
+    """Many wanted pairs on a small problem (k = 60 of 600): the dense tests dominated when run
+    after every step.  Spaced, they are at most a quarter as many, for at most 15% more solves
+    and the same pairs, bit for bit reproducible.  A shift-invert-like spectrum (1 / i)."""
+    n, k = 600, 60
+    spectrum = 1.0 / np.arange(1, n + 1)
+    T, op = _hermitian_operator(n, spectrum)
+    theta0, _, n_op0, tests0 = _counted_lanczos(monkeypatch, T, op, k, every_step=True)
+    theta, Y, n_op, tests = _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+    np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
+    np.testing.assert_allclose(theta0, spectrum[:k], rtol=1e-11)
+    np.testing.assert_allclose(Y.conj().T @ Y, np.eye(k), atol=1e-13)
+    residual = np.linalg.norm(T @ Y - Y * theta, axis=0) / theta
+    assert residual.max() <= 1e-10
+    assert len(tests) <= len(tests0) / 4, (len(tests), len(tests0))
+    assert n_op <= 1.15 * n_op0, (n_op, n_op0)
+    theta2, Y2, n_op2, tests2 = _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+    assert (n_op2, tests2) == (n_op, tests)
+    assert np.array_equal(theta2, theta) and np.array_equal(Y2, Y)
+
+
+def test_lanczos_tests_every_step_when_tests_are_cheap(monkeypatch):
+    """Few wanted pairs on a larger problem (the Spot regime, cols^2 << n): a test after every
+    step, as before the schedule existed, so that no solve is spent past convergence."""
+    n, k = 1500, 6
+    spectrum = 1.0 / np.arange(1, n + 1)
+    T, op = _hermitian_operator(n, spectrum)
+    _, _, n_op0, tests0 = _counted_lanczos(monkeypatch, T, op, k, every_step=True)
+    theta, _, n_op, tests = _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+    np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
+    assert (n_op, tests) == (n_op0, tests0)
+
+
+def test_test_schedule_never_skips_past_half_the_predicted_steps():
+    """The schedule itself: the first test is due at once; the gap is the cost bound
+    (round(1.5 cols^2 / n) steps) unless the rate of convergence predicts convergence
+    sooner, then half the predicted steps, and at least one step."""
+    from torch_edgevf.linalg.eigen import _TestSchedule
+
+    s = _TestSchedule(n=100)
+    assert s.due(cols=40, n_op=0, b=2)
+    s.record(np.array([1e10, 1e4]), n_op=40, b=2)  # worst log10 ratio 10, no rate yet
+    by_cost = round(1.5 * 40 * 40 / 100)  # 24 steps of 2 solves
+    assert not s.due(cols=40, n_op=40 + 2 * by_cost - 1, b=2)
+    assert s.due(cols=40, n_op=40 + 2 * by_cost, b=2)
+    s.record(np.array([1e6]), n_op=60, b=2)  # 4 decades in 10 steps: 15 steps left, test in 7
+    assert not s.due(cols=40, n_op=60 + 2 * 7 - 1, b=2)
+    assert s.due(cols=40, n_op=60 + 2 * 7, b=2)
+    s.record(np.array([1e5]), n_op=74, b=2)  # slower now: 0.14 decades per step
+    assert s.predicted == int(0.5 * 5 / (1 / 7))
+    s.record(np.array([2e5]), n_op=76, b=2)  # no progress: the cost bound alone
+    assert s.predicted == np.inf
+    s.record(np.array([1.0001]), n_op=80, b=2)
+    assert s.predicted == 1  # (at least one step)
+
 # --------------------------------------------------------------- adaptive block size
 
 

@@ -1,4 +1,4 @@
-"""Sparse factorizations: factor once, solve many right-hand sides.
+r"""Sparse factorizations: factor once, solve many right-hand sides.
 
 Back-ends
 ---------
