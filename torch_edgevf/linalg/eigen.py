@@ -376,21 +376,23 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
     return theta[:k], inner.combine(V[:, :cols], S[:, :k]), n_op
 
 
+_CHEAP_TEST_GAP = 4  # steps: the longest gap between cheap tests (see _TestSchedule)
+
+
 class _TestSchedule:
     """When the block Lanczos loop tests convergence.
 
     A test is a dense eigendecomposition of the ``cols x cols`` projected matrix: about
     ``1.5 cols^2 / n`` times the cost of a step (a small solve and the reorthogonalization;
     complex, measured: 0.5 ms at ``cols = 50`` against 0.3-0.5 ms for a step on 3,000
-    edges, 40 ms at ``cols = 384``).  Where that rounds to one or less -- few wanted pairs
-    on a large mesh, e.g. 24 on Spot -- every step is tested.  Where it does not -- 128
-    pairs on a 3,000-edge mesh, where testing every step took three quarters of the time
-    -- the tests are spaced so that they cost about as much as the steps, but never
-    beyond half the number of steps that the current rate of convergence predicts are
-    left: the worst ``log10(residual / (tol |theta|))`` of the wanted pairs, and its fall
-    per step between the last two tests.  Lanczos convergence accelerates, so the last
-    gaps shrink to one step.  The schedule depends only on computed quantities, so runs
-    are reproducible.
+    edges, 40 ms at ``cols = 384``).  Where that exceeds one -- 128 pairs on a 3,000-edge
+    mesh, where testing after every step took three quarters of the time -- the tests are
+    spaced so that they cost about as much as the steps; where it does not -- 24 pairs on
+    Spot -- at most ``_CHEAP_TEST_GAP`` steps apart.  Either way never beyond half the
+    number of steps that the current rate of convergence predicts are left: the worst
+    ``log10(residual / (tol |theta|))`` of the wanted pairs, and its fall per step between
+    the last two tests.  Lanczos convergence accelerates, so the last gaps shrink to one
+    step.  The schedule depends only on computed quantities, so runs are reproducible.
     """
 
     def __init__(self, n):
@@ -401,8 +403,9 @@ class _TestSchedule:
     def due(self, cols, n_op, b):
         if self.last is None:
             return True
-        by_cost = max(1, int(round(1.5 * cols * cols / self.n)))
-        return n_op - self.last[0] >= b * min(by_cost, self.predicted)
+        by_cost = int(round(1.5 * cols * cols / self.n))
+        gap = min(by_cost, self.predicted) if by_cost > 1 else min(self.predicted, _CHEAP_TEST_GAP)
+        return n_op - self.last[0] >= b * gap
 
     def record(self, ratio, n_op, b):
         worst = float(np.log10(max(float(np.max(ratio)), 1e-300)))
