@@ -780,3 +780,23 @@ def test_many_pairs_on_an_icosphere_are_accurate(caplog, k):
     assert solves and solves[-1] <= 6 * k, solves
     dense = scipy.linalg.eigh(A.toarray(), M.toarray(), eigvals_only=True, subset_by_index=[0, k - 1])
     np.testing.assert_allclose(lam, dense, rtol=1e-10)
+
+
+def test_auto_method_goes_dense_when_k_is_a_large_part_of_n(monkeypatch):
+    """``method="auto"``: dense for N <= 300 and for N <= 6 k (up to 4000), Lanczos otherwise;
+    both give the same pairs."""
+    from torch_edgevf.linalg import eigen
+
+    assert eigen._dense_is_faster(300, 1) and not eigen._dense_is_faster(301, 1)
+    assert eigen._dense_is_faster(642, 128) and not eigen._dense_is_faster(1920, 128)
+    assert not eigen._dense_is_faster(6000, 1000)
+    calls = []
+    dense = eigen._eig_dense
+    monkeypatch.setattr(eigen, "_eig_dense", lambda *a: calls.append(a[0].shape[0]) or dense(*a))
+    p = grid_laplacian(20, 20)  # N = 400
+    A, m = p.hermitian().detach(), p.m
+    lam_auto, _ = eigsh(A, m, 70)
+    assert calls == [400]
+    lam_lanczos, _ = eigsh(A, m, 70, method="lanczos")
+    assert calls == [400]
+    torch.testing.assert_close(lam_auto, lam_lanczos, rtol=1e-10, atol=1e-12)
