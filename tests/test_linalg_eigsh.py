@@ -370,15 +370,21 @@ def _counted_lanczos(monkeypatch, T, op, k, every_step):
     return theta, Y, n_op, tests
 
 
+def _both_schedules(monkeypatch, n, k):
+    """A shift-invert-like spectrum (1 / i): the operator, and ``_counted_lanczos`` with a test
+    after every step, then with the schedule."""
+    spectrum = 1.0 / np.arange(1, n + 1)
+    T, op = _hermitian_operator(n, spectrum)
+    every = _counted_lanczos(monkeypatch, T, op, k, every_step=True)
+    return spectrum, T, op, every, _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+
+
 def test_lanczos_spaces_its_tests_when_they_cost_more_than_steps(monkeypatch):
     """Many wanted pairs on a small problem (k = 60 of 600): the dense tests dominated when run
     after every step.  Spaced, they are at most a quarter as many, for at most 15% more solves
     and the same pairs, bit for bit reproducible.  A shift-invert-like spectrum (1 / i)."""
-    n, k = 600, 60
-    spectrum = 1.0 / np.arange(1, n + 1)
-    T, op = _hermitian_operator(n, spectrum)
-    theta0, _, n_op0, tests0 = _counted_lanczos(monkeypatch, T, op, k, every_step=True)
-    theta, Y, n_op, tests = _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+    k = 60
+    spectrum, T, op, (theta0, _, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(monkeypatch, 600, k)
     np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
     np.testing.assert_allclose(theta0, spectrum[:k], rtol=1e-11)
     np.testing.assert_allclose(Y.conj().T @ Y, np.eye(k), atol=1e-13)
@@ -395,11 +401,8 @@ def test_lanczos_tests_cheaply_where_tests_are_cheap(monkeypatch):
     """Few wanted pairs on a larger problem (the Spot regime, cols^2 << n): the tests are
     spaced by the predicted convergence only (at most 4 steps apart), which leaves the
     solve count and the pairs as with a test after every step."""
-    n, k = 1500, 6
-    spectrum = 1.0 / np.arange(1, n + 1)
-    T, op = _hermitian_operator(n, spectrum)
-    theta0, Y0, n_op0, tests0 = _counted_lanczos(monkeypatch, T, op, k, every_step=True)
-    theta, Y, n_op, tests = _counted_lanczos(monkeypatch, T, op, k, every_step=False)
+    k = 6
+    spectrum, _, _, (theta0, Y0, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(monkeypatch, 1500, k)
     np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
     assert n_op == n_op0
     assert np.array_equal(theta, theta0) and np.array_equal(Y, Y0)
