@@ -405,7 +405,8 @@ class _TestSchedule:
     spaced so that they cost about as much as the steps; where it does not -- 24 pairs on
     Spot -- at most ``_CHEAP_TEST_GAP`` steps apart.  Either way never beyond half the
     number of steps that the current rate of convergence predicts are left: the worst
-    ``log10(residual / (tol |theta|))`` of the wanted pairs, and its fall per step between
+    ``log10(residual / bound)`` of the wanted pairs (``bound``: ``tol |theta|`` or the
+    floor, see ``_FLOOR``), and its fall per step between
     the last two tests.  Lanczos convergence accelerates, so the last gaps shrink to one
     step.  The schedule depends only on computed quantities, so runs are reproducible.
     """
