@@ -84,6 +84,10 @@ logger = logging.getLogger(__name__)
 METHODS = ("auto", "lanczos", "dense")
 _DENSE_MAX = 300
 _DENSE_MAX_MANY = 4000  # (a dense complex matrix of this size: 256 MB)
+_MAX_BLOCK = 6
+_CLUSTER_RTOL = 1e-5
+_SHIFT_EPS = 1e-5
+_STEV = get_lapack_funcs("stev", dtype=np.float64)
 
 
 def _dense_is_faster(n, k):
@@ -93,10 +97,6 @@ def _dense_is_faster(n, k):
     against 0.156 s by Lanczos (the DiffusionNet precompute on small meshes); 128 pairs of
     its connection Laplacian (n = 1,920, complex) 2.5 s dense against 0.55 s."""
     return n <= _DENSE_MAX or (n <= 6 * k and n <= _DENSE_MAX_MANY)
-_MAX_BLOCK = 6
-_CLUSTER_RTOL = 1e-5
-_SHIFT_EPS = 1e-5
-_STEV = get_lapack_funcs("stev", dtype=np.float64)
 
 
 class EigenPairs(NamedTuple):
@@ -406,9 +406,9 @@ class _TestSchedule:
     Spot -- at most ``_CHEAP_TEST_GAP`` steps apart.  Either way never beyond half the
     number of steps that the current rate of convergence predicts are left: the worst
     ``log10(residual / bound)`` of the wanted pairs (``bound``: ``tol |theta|`` or the
-    floor, see ``_FLOOR``), and its fall per step between
-    the last two tests.  Lanczos convergence accelerates, so the last gaps shrink to one
-    step.  The schedule depends only on computed quantities, so runs are reproducible.
+    floor, see ``_FLOOR``), and its fall per step between the last two tests.  Lanczos
+    convergence accelerates, so the last gaps shrink to one step.  The schedule depends
+    only on computed quantities, so runs are reproducible.
     """
 
     def __init__(self, n):
@@ -644,7 +644,7 @@ def _harmonic_ritz(V, alpha, betas, j, w, beta, inner: _Inner):
     Selective orthogonalization drops small terms from the relation, so the caller
     compares the two vectors' true residuals and keeps the better one.
     """
-    H = np.diag(alpha[: j + 1]) + np.diag(betas[:j], 1) + np.diag(betas[:j], -1)
+    H = _tridiagonal(alpha[: j + 1], betas[:j])
     G = H @ H
     G[j, j] += beta * beta
     try:
@@ -683,9 +683,13 @@ def _tridiagonal_eigh(d, e):
     """
     theta, S, info = _STEV(d, e, compute_v=1)
     if info != 0:  # (QL/QR did not converge: never seen; the dense solver then)
-        e = e[: d.size - 1]
-        theta, S = scipy.linalg.eigh(np.diag(d) + np.diag(e, 1) + np.diag(e, -1))
+        theta, S = scipy.linalg.eigh(_tridiagonal(d, e[: d.size - 1]))
     return theta[::-1], S[:, ::-1]
+
+
+def _tridiagonal(d, e):
+    """The dense symmetric tridiagonal matrix with diagonal ``d`` and off-diagonal ``e``."""
+    return np.diag(d) + np.diag(e, 1) + np.diag(e, -1)
 
 
 def _rayleigh_ritz(A, M, X):
