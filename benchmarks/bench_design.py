@@ -47,9 +47,9 @@ def worker(mesh: str) -> None:
     import scipy.sparse
     import torch
 
-    from torch_edgevf.design import FieldDesigner
+    from torch_edgevf.fields.design import FieldDesigner
     from torch_edgevf.linalg import factorize
-    from torch_edgevf.linalg._utils import as_sparse
+    from torch_edgevf.linalg import to_scipy
     from torch_edgevf.linalg.eigen import default_shift
     from torch_edgevf.linalg.factor import cholmod_module
 
@@ -75,7 +75,7 @@ def worker(mesh: str) -> None:
     _emit(mesh=mesh, what="smoothest", seconds=smoothest, eigenvalue=float(lam),
           rayleigh=float(designer.rayleigh_quotient(z)))
 
-    a = as_sparse(designer.laplacian).to_scipy()
+    a = to_scipy(designer.laplacian)
     m = scipy.sparse.diags(designer.mass.detach().numpy()).tocsc()
     sigma = default_shift(a, m)
     k = (a - sigma * m).tocsc()

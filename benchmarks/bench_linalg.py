@@ -49,7 +49,7 @@ from common import machine_info, markdown_table
 from torch_edgevf import EdgeOperators, icosphere
 from torch_edgevf.linalg import SparseSolver, eigsh, solve, sparse_matrix
 from torch_edgevf.linalg import factor as factor_module
-from torch_edgevf.linalg._utils import as_sparse
+from torch_edgevf.linalg import to_scipy
 from torch_edgevf.linalg.eigen import default_shift
 
 SPOT = Path(__file__).resolve().parents[1].parent / "shared" / "meshes" / "spot.obj"
@@ -95,10 +95,10 @@ def scipy_eigsh(A, M, k, sigma, tol):
 def bench(name, verts, faces, k, repeats, rows):
     ops = EdgeOperators(verts, faces, n=1)
     L, Mz = ops.connection_laplacian.detach().coalesce(), ops.mass.detach().coalesce()
-    A, M = as_sparse(L).to_scipy(), as_sparse(Mz).to_scipy()
+    A, M = to_scipy(L), to_scipy(Mz)
     n = A.shape[0]
     K_t = (L + Mz.to(L.dtype)).coalesce()
-    K = as_sparse(K_t).to_scipy()
+    K = to_scipy(K_t)
     b = torch.randn(n, dtype=L.dtype, generator=torch.Generator().manual_seed(0))
     b_np = b.numpy()
     sigma = default_shift(A, M)

@@ -164,10 +164,9 @@ def worker_edgevf(name: str) -> dict:
     out["peak_rss_stages"] = peaks
     out["hwm_exact"] = pm.exact
 
-    import scipy.sparse as sp
+    from torch_edgevf.linalg import to_scipy
 
-    idx = lc.indices().numpy()
-    a = sp.csr_matrix((lc.values().numpy(), (idx[0], idx[1])), shape=tuple(lc.shape))
+    a = to_scipy(lc)
     xn = x.numpy()
     t_mv_scipy = time_it("matvec scipy CSR", lambda: a @ xn, repeats=mv_reps, warmup=3)
     check = float(np.abs((lc @ x).numpy() - a @ xn).max())
@@ -215,7 +214,6 @@ def worker_peers(name: str, check: bool) -> dict:
 def _compare_with_igl(v, f, ue, emap) -> float:
     """max |L_c^(0) - igl CR Laplacian| after matching edge orders (they should agree)."""
     import igl
-    import scipy.sparse as sp
     import torch
 
     ev = _import_edgevf()
@@ -226,8 +224,9 @@ def _compare_with_igl(v, f, ue, emap) -> float:
     key_ours = ours[:, 0] * nv + ours[:, 1]
     key_igl = ue.min(1) * nv + ue.max(1)
     perm = np.searchsorted(key_ours, key_igl)
-    idx = l0.indices().numpy()
-    mine = sp.csr_matrix((l0.values().numpy(), (idx[0], idx[1])), shape=tuple(l0.shape))[perm][:, perm]
+    from torch_edgevf.linalg import to_scipy
+
+    mine = to_scipy(l0)[perm][:, perm]
     theirs = igl.crouzeix_raviart_cotmatrix(v, f, ue, emap)
     return float(abs(mine - theirs).max())
 

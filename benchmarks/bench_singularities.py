@@ -21,10 +21,9 @@ from pathlib import Path
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.fields import edge_frames
-from torch_edgevf.param import parametrize
-from torch_edgevf.singularities import singularities
-from torch_edgevf.topology import Topology
+from torch_edgevf.fields.param import parametrize
+from torch_edgevf.fields.singularities import singularities
+from torch_edgevf.mesh.topology import Topology
 
 log = logging.getLogger("bench_singularities")
 SPOT = Path("/work/shared/meshes/spot.obj")
@@ -40,11 +39,10 @@ def timed(fn, repeats: int = 3):
 
 
 def rotation_cross_field(verts, topo):
-    x, y, _ = edge_frames(verts, topo)
     e = topo.edges
     p = (verts[e[:, 0]] + verts[e[:, 1]]) / 2
     w3 = torch.linalg.cross(torch.tensor([0.0, 0.0, 1.0], dtype=p.dtype).expand_as(p), p)
-    w = torch.complex((w3 * x).sum(1), (w3 * y).sum(1))
+    w = ev.edges_from_vectors(verts, topo, w3)
     return w.abs() * torch.polar(torch.ones_like(w.real), 4 * torch.angle(w))
 
 
@@ -63,7 +61,7 @@ def main(large: bool = False, repeats: int = 3):
     print("|---|---|---|---|---|---|---|---|")
     rows = []
     if SPOT.exists():
-        from torch_edgevf.design import smoothest_field
+        from torch_edgevf.fields.design import smoothest_field
         from torch_edgevf.io import load_mesh
 
         v, f = load_mesh(SPOT)

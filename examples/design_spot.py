@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from torch_edgevf import fields
-from torch_edgevf.design import FieldDesigner
+from torch_edgevf.fields.design import FieldDesigner
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """Seamless (u, v) parametrization of Spot from a curvature-aligned cross field (chapter 4).
 
 Run ``python examples/param_spot.py``; prints the cut, the flip count and the rounding.
-Quad extraction from (u, v) is not part of the library (see ``torch_edgevf.param``).
+Quad extraction from (u, v) is not part of the library (see ``torch_edgevf.fields.param``).
 """
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ import logging
 
 import numpy as np
 
-from torch_edgevf.design import curvature_aligned_field
+from torch_edgevf.fields.design import curvature_aligned_field
 from torch_edgevf.io import default_mesh
-from torch_edgevf.param import parametrize
+from torch_edgevf.fields.param import parametrize
 
 log = logging.getLogger(__name__)
 
 
 def main(mesh=None, scale: float | None = None, round_integers: bool = True):
-    """Return the :class:`~torch_edgevf.param.Parametrization` of Spot (or ``mesh``)."""
+    """Return the :class:`~torch_edgevf.fields.param.Parametrization` of Spot (or ``mesh``)."""
     verts, faces = default_mesh() if mesh is None else mesh
     z = curvature_aligned_field(verts, faces, n=4)
     P = parametrize(verts, faces, z, scale=scale, round_integers=round_integers)

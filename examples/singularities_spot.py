@@ -8,16 +8,15 @@ from __future__ import annotations
 
 import logging
 
-import torch_edgevf as ev
-from torch_edgevf.design import smoothest_field
+from torch_edgevf.fields.design import smoothest_field
 from torch_edgevf.io import default_mesh
-from torch_edgevf.singularities import locate_singularities, singularities
+from torch_edgevf.fields.singularities import locate_singularities, singularities
 
 log = logging.getLogger(__name__)
 
 
 def main(mesh=None, n: int = 4):
-    """Return the :class:`~torch_edgevf.singularities.Singularities` of the smoothest n-field."""
+    """Return the :class:`~torch_edgevf.fields.singularities.Singularities` of the smoothest n-field."""
     verts, faces = default_mesh() if mesh is None else mesh
     z = smoothest_field(verts, faces, n=n)
     s = singularities(verts, faces, z, n=n)

@@ -16,9 +16,8 @@ import math
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.fields import edge_frames
-from torch_edgevf.topology import Topology
-from torch_edgevf.transport import Transporter
+from torch_edgevf.mesh.topology import Topology
+from torch_edgevf.fields.transport import Transporter
 
 log = logging.getLogger(__name__)
 
@@ -28,12 +27,11 @@ def main(level: int = 4, turns: int = 3, steps_per_turn: int = 8, smoothing: flo
     ``|z|`` against ``|w|`` and of ``z`` against the exact transport."""
     verts, faces = ev.icosphere(level)
     topo = Topology(faces)
-    x, y, _ = edge_frames(verts, topo)
     e = topo.edges
     p = (verts[e[:, 0]] + verts[e[:, 1]]) / 2
     p = p / p.norm(dim=1, keepdim=True)
     w3 = torch.linalg.cross(torch.tensor([0.0, 0.0, 1.0], dtype=p.dtype).expand_as(p), p)
-    w = torch.complex((w3 * x).sum(1), (w3 * y).sum(1))
+    w = ev.edges_from_vectors(verts, topo, w3)
     tr = Transporter(verts, topo, w, smoothing=smoothing)
     z = w
     out = []

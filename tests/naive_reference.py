@@ -5,7 +5,7 @@ thesis formulas (chapters 2-5, appendix A) with one Python loop over faces and d
 arrays, so that tests can compare the vectorised torch implementation against it. It is meant
 to be obviously correct, not fast; use it on meshes with at most a few hundred faces.
 
-Conventions (identical to ``torch_edgevf.topology``)
+Conventions (identical to ``torch_edgevf.mesh.topology``)
 ----------------------------------------------------
 * ``verts`` is a ``(V, 3)`` float64 array, ``faces`` an ``(F, 3)`` integer array of
   counter-clockwise triangles; corner ``k`` of face ``f`` is the vertex ``f[k]``.

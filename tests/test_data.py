@@ -7,9 +7,10 @@ import pytest
 import scipy.linalg
 import torch
 
-import torch_edgevf
 import torch_edgevf as ev
 from torch_edgevf import data
+from torch_edgevf.learning import cache as cache_module
+from torch_edgevf.learning import progress as progress_module
 
 from conftest import perturbed_icosphere
 
@@ -168,13 +169,13 @@ def _rebuilt(cache, v, f, options, caplog):
         calls.append(1)
         return real(*args, **kwargs)
 
-    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
         caplog.clear()
-        data.compute_operators = counting
+        cache_module.compute_operators = counting
         try:
             out = cache.get(v, f, **options)
         finally:
-            data.compute_operators = real
+            cache_module.compute_operators = real
     assert calls == [1]
     assert any("invalid" in r.getMessage() and "rebuilding" in r.getMessage() for r in caplog.records)
     return out
@@ -204,7 +205,7 @@ def test_cache_flipped_bytes_are_rebuilt(cache_setup, caplog):
 def test_cache_version_change_is_rebuilt(cache_setup, caplog, monkeypatch):
     v, f, cache, options = cache_setup
     cache.get(v, f, **options)
-    monkeypatch.setattr(torch_edgevf, "__version__", "0.0.0-other")
+    monkeypatch.setattr(cache_module, "__version__", "0.0.0-other")
     _rebuilt(cache, v, f, options, caplog)
     assert any("version" in r.getMessage() for r in caplog.records)
 
@@ -215,7 +216,7 @@ def test_cache_version_change_is_rebuilt(cache_setup, caplog, monkeypatch):
 def test_progress_is_quiet_under_pytest(capsys):
     assert list(data.progress(range(3), desc="x")) == [0, 1, 2]
     assert capsys.readouterr().err == ""
-    bar = data._SimpleBar(range(2), 2, "ops")
+    bar = progress_module._SimpleBar(range(2), 2, "ops")
     assert list(bar) == [0, 1]
     assert "ops: 2/2" in capsys.readouterr().err
     assert list(data.progress(range(2), desc="shown", enabled=True)) == [0, 1]
@@ -254,7 +255,7 @@ def test_repair_degenerate_face_of_psb_351():
 def test_psb_dataset_degenerate_policies(caplog):
     if not PSB.exists():
         pytest.skip("PSB file not available")
-    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
         ds = data.PSBDataset(split="train", ids=[351], degenerate="skip")
     assert len(ds) == 0 and ds.skipped == [351]
     assert any("351" in r.getMessage() and "skipped" in r.getMessage() for r in caplog.records)
@@ -262,7 +263,7 @@ def test_psb_dataset_degenerate_policies(caplog):
         data.PSBDataset(split="all", ids=[351], degenerate="error")
     assert len(data.PSBDataset(split="test", ids=[351])) == 0  # 351 is in the training split
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="torch_edgevf.data"):
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
         ds = data.PSBDataset(split="all", ids=[351], k_edge=4, k_vertex=4, hks_count=3)
     assert len(ds) == 1 and ds.repaired == [351] and ds.psb_ids == [351]
     assert any("repaired" in r.getMessage() for r in caplog.records)

@@ -1,4 +1,4 @@
-"""Field design (torch_edgevf.design): eigenproblems, constraints, alignment, diffusion."""
+"""Field design (torch_edgevf.fields.design): eigenproblems, constraints, alignment, diffusion."""
 
 import math
 
@@ -11,7 +11,7 @@ import torch_edgevf as ev
 from torch_edgevf import design as D
 from torch_edgevf import fields as F
 from torch_edgevf.linalg import solve_fixed
-from torch_edgevf.topology import Topology
+from torch_edgevf.mesh.topology import Topology
 
 from conftest import dense, perturbed_icosphere
 
@@ -269,7 +269,7 @@ def test_soft_alignment_trades_alignment_for_smoothness(designer):
 def test_alignment_above_the_first_eigenvalue_warns(designer, caplog):
     lam1 = float(designer.smoothest(return_eigenvalue=True)[1])
     w = torch.ones(designer.num_edges, dtype=C128)
-    with caplog.at_level("WARNING", logger="torch_edgevf.design"):
+    with caplog.at_level("WARNING", logger="torch_edgevf.fields.design"):
         z = designer.aligned(w, 1.5 * lam1)
     assert "is not below the first eigenvalue" in caplog.text
     residual = (designer.laplacian @ z[:, None])[:, 0] - 1.5 * lam1 * designer.mass * z - designer.mass * w

@@ -8,7 +8,7 @@ import torch
 
 import torch_edgevf as ev
 from torch_edgevf import fields as F
-from torch_edgevf.topology import Topology
+from torch_edgevf.mesh.topology import Topology
 
 from conftest import perturbed_grid, perturbed_icosphere
 
@@ -19,9 +19,7 @@ def planar_field(v, topo, fn):
     """Edge values of the planar vector field ``fn(p) -> (P, 3)`` at edge midpoints."""
     e = topo.edges
     mid = (v[e[:, 0]] + v[e[:, 1]]) / 2
-    x, y, _ = F.edge_frames(v, topo)
-    vec = fn(mid)
-    return torch.complex((vec * x).sum(1), (vec * y).sum(1))
+    return ev.edges_from_vectors(v, topo, fn(mid))
 
 
 def random_points(topo, num, seed=0, dtype=torch.float64):
@@ -138,6 +136,26 @@ def test_face_values_is_interpolation_at_barycenter_and_face_mean(closed_mesh):
     vals = torch.stack([F.interpolate(v, topo, z, torch.arange(topo.num_faces), mids[k].expand(topo.num_faces, 3))
                         for k in range(3)])
     assert torch.allclose(vals.mean(0), F.face_values(v, topo, z))
+
+
+def test_edges_from_vectors_inverts_edge_vectors(closed_mesh):
+    """Round trip z -> edge_vectors -> edges_from_vectors is the identity; the normal part of
+    an ambient vector is dropped (its tangent projection is kept)."""
+    v, f = closed_mesh
+    topo = Topology(f)
+    g = torch.Generator().manual_seed(3)
+    z = torch.complex(torch.randn(topo.num_edges, generator=g, dtype=torch.float64),
+                      torch.randn(topo.num_edges, generator=g, dtype=torch.float64))
+    vec = F.edge_vectors(v, topo, z)
+    torch.testing.assert_close(F.edges_from_vectors(v, topo, vec), z)
+    _, _, normal = F.edge_frames(v, topo)
+    torch.testing.assert_close(ev.edges_from_vectors(v, topo, vec + 2.5 * normal), z)
+    torch.testing.assert_close(F.edge_vectors(v, topo, ev.edges_from_vectors(v, f, vec)), vec)
+    assert ev.edges_from_vectors(v.float(), topo, vec.float()).dtype == torch.complex64
+    with pytest.raises(ValueError, match="shape"):
+        ev.edges_from_vectors(v, topo, vec[:-1])
+    with pytest.raises(ValueError, match="floating"):
+        ev.edges_from_vectors(v, topo, torch.ones(topo.num_edges, 3, dtype=torch.int64))
 
 
 def test_face_edge_coefficients_match_3d_frames(closed_mesh):

@@ -9,9 +9,9 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.geometry import FaceGeometry, face_geometry
+from torch_edgevf.mesh.geometry import FaceGeometry, face_geometry
 
-from conftest import perturbed_grid, perturbed_icosphere
+from conftest import perturbed_icosphere
 
 
 def test_angles_sum_to_pi_and_match_lengths(closed_mesh):

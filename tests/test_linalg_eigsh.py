@@ -214,7 +214,7 @@ def test_smallest_pair_fast_path_matches_general_path_and_dense(dtype, caplog):
     import logging
 
     p = grid_laplacian(12, 13, dtype, shift=0.05)
-    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg"):
         lam, X = eigsh(p.A, p.m, 1, method="lanczos")
     lam_gen, X_gen = eigsh(p.A, p.m, 1, method="lanczos", block_size=2)  # general block path
     ref_lam, ref_X = reference(p, 1)
@@ -274,21 +274,21 @@ def _hermitian_operator(n, spectrum, seed=0):
 
 def _run_lanczos(monkeypatch, T, op, k, **kw):
     """``_lanczos`` on ``op``, counting the deferred passes and the restarts' completions."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     calls = {"deferred": 0, "complete": 0}
     for name in calls:
-        fn = getattr(eigen, f"_{name}" if name == "complete" else "_deferred_pass")
+        fn = getattr(lanczos, f"_{name}" if name == "complete" else "_deferred_pass")
 
         def counted(*a, _fn=fn, _name=name, **k_):
             calls[_name] += 1
             return _fn(*a, **k_)
 
-        monkeypatch.setattr(eigen, f"_{name}" if name == "complete" else "_deferred_pass", counted)
+        monkeypatch.setattr(lanczos, f"_{name}" if name == "complete" else "_deferred_pass", counted)
     n = T.shape[0]
-    inner = eigen._Inner(np.complex128)
+    inner = lanczos._Inner(np.complex128)
     v0 = np.random.default_rng(1).standard_normal(n)
-    theta, Y, n_op = eigen._lanczos(op, inner, n, k, tol=1e-12, maxiter=100, v0=v0, **kw)
+    theta, Y, n_op = lanczos._lanczos(op, inner, n, k, tol=1e-12, maxiter=100, v0=v0, **kw)
     return theta, Y, n_op, calls
 
 
@@ -322,16 +322,16 @@ def test_lanczos_deferred_pass_survives_invariant_subspaces(monkeypatch):
     multiplicity -- the breakdowns' random directions find the missing copies -- and the
     Ritz vectors stay orthonormal.
     """
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     fallbacks = []
-    orig = eigen._orthonormalize
+    orig = lanczos._orthonormalize
 
     def counted(W, V, *a, lo=0, **kw):
         fallbacks.append(lo > 0)  # lo > 0 only on the near-breakdown fallbacks
         return orig(W, V, *a, lo=lo, **kw)
 
-    monkeypatch.setattr(eigen, "_orthonormalize", counted)
+    monkeypatch.setattr(lanczos, "_orthonormalize", counted)
     n = 150
     for distinct in (4, 5, 6, 7):
         for mult in (2, 3, 4):
@@ -339,7 +339,7 @@ def test_lanczos_deferred_pass_survives_invariant_subspaces(monkeypatch):
             spectrum = np.concatenate([np.repeat(values[:-1], mult), np.full(n - mult * (distinct - 1), 1.0)])
             T, op = _hermitian_operator(n, spectrum, seed=2)
             k = mult * (distinct - 1)
-            theta, Y, _ = eigen._lanczos(op, eigen._Inner(np.complex128), n, k, block=2, ncv=40, tol=1e-12,
+            theta, Y, _ = lanczos._lanczos(op, lanczos._Inner(np.complex128), n, k, block=2, ncv=40, tol=1e-12,
                                          maxiter=100, v0=np.random.default_rng(1).standard_normal(n))
             np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
             np.testing.assert_allclose(Y.conj().T @ Y, np.eye(k), atol=1e-13)
@@ -351,20 +351,20 @@ def test_lanczos_deferred_pass_survives_invariant_subspaces(monkeypatch):
 
 def _counted_lanczos(monkeypatch, T, op, k, every_step):
     """``_lanczos`` (block 2) with the convergence tests counted; ``every_step`` forces a test per step."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     tests = []
-    ritz = eigen._ritz
+    ritz = lanczos._ritz
 
     def counted(H, cols, b, R):
         tests.append(cols)
         return ritz(H, cols, b, R)
 
-    monkeypatch.setattr(eigen, "_ritz", counted)
+    monkeypatch.setattr(lanczos, "_ritz", counted)
     if every_step:
-        monkeypatch.setattr(eigen._TestSchedule, "due", lambda self, cols, n_op, b: True)
+        monkeypatch.setattr(lanczos._TestSchedule, "due", lambda self, cols, n_op, b: True)
     n = T.shape[0]
-    theta, Y, n_op = eigen._lanczos(op, eigen._Inner(np.complex128), n, k, block=2, ncv=3 * k, tol=1e-12,
+    theta, Y, n_op = lanczos._lanczos(op, lanczos._Inner(np.complex128), n, k, block=2, ncv=3 * k, tol=1e-12,
                                     maxiter=100, v0=np.random.default_rng(1).standard_normal(n))
     monkeypatch.undo()
     return theta, Y, n_op, tests
@@ -414,7 +414,7 @@ def test_test_schedule_never_skips_past_half_the_predicted_steps():
     """The schedule itself: the first test is due at once; the gap is the cost bound
     (round(1.5 cols^2 / n) steps) unless the rate of convergence predicts convergence
     sooner, then half the predicted steps, and at least one step."""
-    from torch_edgevf.linalg.eigen import _TestSchedule
+    from torch_edgevf.linalg.lanczos import _TestSchedule
 
     s = _TestSchedule(n=100)
     assert s.due(cols=40, n_op=0, b=2)
@@ -452,7 +452,7 @@ def test_block_grows_on_multiple_eigenvalues_without_symmetry(caplog):
     Z = torch.zeros_like(A)
     big = torch.cat([torch.cat([A, Z, Z], 1), torch.cat([Z, A, Z], 1), torch.cat([Z, Z, A], 1)])
     m = p.m.repeat(3)
-    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg"):
         lam = eigsh(big.to_sparse(), m, 9, method="lanczos").values
     ref = eigsh(big.to_sparse(), m, 9, method="dense").values
     torch.testing.assert_close(lam, ref, rtol=1e-10, atol=1e-12)
@@ -463,7 +463,7 @@ def test_no_block_growth_on_a_simple_spectrum(caplog):
     import logging
 
     p = grid_laplacian(9, 11, torch.complex128, shift=0.1)
-    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg.eigen"):
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg"):
         lam = eigsh(p.A, p.m, 8, method="lanczos").values
     np.testing.assert_allclose(lam.numpy(), reference(p, 8)[0], rtol=1e-10)
     assert not any("block size" in r.getMessage() for r in caplog.records)
@@ -613,7 +613,7 @@ def test_gradcheck_eigsh_with_cholespy(cholespy_factors):
 @pytest.mark.parametrize("dtype", [np.float64, np.complex128])
 def test_inner_products_narrow_and_wide_blocks_match_numpy(dtype):
     """The gemv branches (one or two columns) and the gemm branch agree with plain NumPy."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     rng = np.random.default_rng(3)
     n = 57
@@ -624,7 +624,7 @@ def test_inner_products_narrow_and_wide_blocks_match_numpy(dtype):
 
     m = rng.uniform(0.5, 2.0, n)
     for mmul in (None, lambda W: np.asfortranarray(m[:, None] * W)):
-        inner = eigen._Inner(dtype, mmul=mmul)
+        inner = lanczos._Inner(dtype, mmul=mmul)
         weight = np.ones(n) if mmul is None else m
         for cols in (1, 2, 3, 7):
             for b in (1, 2, 4):
@@ -644,11 +644,11 @@ def test_inner_products_narrow_and_wide_blocks_match_numpy(dtype):
 
 @pytest.mark.parametrize("size", [1, 2, 9])
 def test_tridiagonal_eigh_matches_dense(size):
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     rng = np.random.default_rng(size)
     d, e = rng.standard_normal(size), rng.standard_normal(max(size - 1, 1))
-    theta, S = eigen._tridiagonal_eigh(d, e)
+    theta, S = lanczos._tridiagonal_eigh(d, e)
     T = np.diag(d) + np.diag(e[: size - 1], 1) + np.diag(e[: size - 1], -1)
     ref = np.linalg.eigvalsh(T)[::-1]
     np.testing.assert_allclose(theta, ref, rtol=1e-13, atol=1e-13)
@@ -661,7 +661,7 @@ def test_tridiagonal_eigh_matches_dense(size):
 def test_scaled_shifted_matrix(dtype, full_diagonal):
     """D (A - sigma M) D from the CSR arrays equals the dense formula, with or without
     a stored entry on every diagonal position."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     rng = np.random.default_rng(4)
     n = 30
@@ -679,7 +679,7 @@ def test_scaled_shifted_matrix(dtype, full_diagonal):
     A.sort_indices()
     m = rng.uniform(0.5, 2.0, n)
     sigma = -0.3
-    K = eigen._scaled_shifted(A, m, 1 / np.sqrt(m), sigma)
+    K = lanczos._scaled_shifted(A, m, 1 / np.sqrt(m), sigma)
     assert K.format == "csc"
     D = np.diag(1 / np.sqrt(m))
     np.testing.assert_allclose(K.toarray(), D @ (A.toarray() - sigma * np.diag(m)) @ D, rtol=1e-14, atol=1e-14)
@@ -702,7 +702,7 @@ def test_smallest_pair_harmonic_ritz_vector():
     """The fast path returns the Ritz and the harmonic Ritz vector; on a shift-invert
     spectrum the harmonic one has the (much) smaller residual in the original problem,
     and the returned pair is the better of the two."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     rng = np.random.default_rng(7)
     n = 400
@@ -715,8 +715,8 @@ def test_smallest_pair_harmonic_ritz_vector():
     def op(Y):
         return np.asfortranarray(T @ Y)
 
-    inner = eigen._Inner(np.complex128)
-    _, Y, n_op = eigen._smallest_pair(op, inner, n, tol=1e-8, maxiter=10, v0=rng.standard_normal(n))
+    inner = lanczos._Inner(np.complex128)
+    _, Y, n_op = lanczos._smallest_pair(op, inner, n, tol=1e-8, maxiter=10, v0=rng.standard_normal(n))
     assert Y.shape[1] == 2
 
     def residual(y):
@@ -725,7 +725,7 @@ def test_smallest_pair_harmonic_ritz_vector():
 
     plain, harmonic = residual(Y[:, 0]), residual(Y[:, 1])
     assert harmonic < 0.2 * plain, (plain, harmonic)
-    y, ky = eigen._better_of(Y, lambda Z: K @ Z)
+    y, ky = lanczos._better_of(Y, lambda Z: K @ Z)
     np.testing.assert_array_equal(y, Y[:, 1:2])
     np.testing.assert_allclose(ky, K @ y)
     # the returned vector is the smallest eigenvector
@@ -741,21 +741,21 @@ def test_lanczos_convergence_floor_for_a_singular_matrix(monkeypatch, caplog):
     without it the same run does not converge."""
     import logging
 
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
     n, k = 800, 60
     spectrum = np.concatenate([[1e5], 1.0 / np.arange(1, n)])
     T, op = _hermitian_operator(n, spectrum)
-    inner = eigen._Inner(np.complex128)
+    inner = lanczos._Inner(np.complex128)
     v0 = np.random.default_rng(1).standard_normal(n)
-    theta, Y, n_op = eigen._lanczos(op, inner, n, k, block=2, ncv=3 * k, tol=1e-13, maxiter=20, v0=v0)
+    theta, Y, n_op = lanczos._lanczos(op, inner, n, k, block=2, ncv=3 * k, tol=1e-13, maxiter=20, v0=v0)
     np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-9)
     residual = np.linalg.norm(T @ Y - Y * theta, axis=0)
     assert residual.max() <= 100 * np.finfo(float).eps * 1e5
     assert n_op <= 400, n_op
-    monkeypatch.setattr(eigen, "_FLOOR", 0.0)
+    monkeypatch.setattr(lanczos, "_FLOOR", 0.0)
     with caplog.at_level(logging.WARNING, logger="torch_edgevf"):
-        _, _, n_op0 = eigen._lanczos(op, inner, n, k, block=2, ncv=3 * k, tol=1e-13, maxiter=20, v0=v0)
+        _, _, n_op0 = lanczos._lanczos(op, inner, n, k, block=2, ncv=3 * k, tol=1e-13, maxiter=20, v0=v0)
     assert "did not converge" in caplog.text and n_op0 > 2 * n_op
 
 
@@ -788,14 +788,14 @@ def test_many_pairs_on_an_icosphere_are_accurate(caplog, k):
 def test_auto_method_goes_dense_when_k_is_a_large_part_of_n(monkeypatch):
     """``method="auto"``: dense for N <= 300 and for N <= 6 k (up to 4000), Lanczos otherwise;
     both give the same pairs."""
-    from torch_edgevf.linalg import eigen
+    from torch_edgevf.linalg import lanczos
 
-    assert eigen._dense_is_faster(300, 1) and not eigen._dense_is_faster(301, 1)
-    assert eigen._dense_is_faster(642, 128) and not eigen._dense_is_faster(1920, 128)
-    assert not eigen._dense_is_faster(6000, 1000)
+    assert lanczos.dense_is_faster(300, 1) and not lanczos.dense_is_faster(301, 1)
+    assert lanczos.dense_is_faster(642, 128) and not lanczos.dense_is_faster(1920, 128)
+    assert not lanczos.dense_is_faster(6000, 1000)
     calls = []
-    dense = eigen._eig_dense
-    monkeypatch.setattr(eigen, "_eig_dense", lambda *a: calls.append(a[0].shape[0]) or dense(*a))
+    dense = lanczos.eig_dense
+    monkeypatch.setattr(lanczos, "eig_dense", lambda *a: calls.append(a[0].shape[0]) or dense(*a))
     p = grid_laplacian(20, 20)  # N = 400
     A, m = p.hermitian().detach(), p.m
     lam_auto, _ = eigsh(A, m, 70)

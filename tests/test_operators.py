@@ -250,13 +250,15 @@ def test_float32_follows_and_matches_float64(closed_mesh):
 
 
 def test_reassembly_reuses_pattern_and_inputs_untouched(closed_mesh):
+    from torch_edgevf.operators import kernels
+
     v, f = closed_mesh
     t = ev.Topology(f)
     v0, f0 = v.clone(), f.clone()
     a = ev.connection_laplacian(v, t)
-    pattern = t._cache[("pattern", "EE")]
+    pattern = kernels.cached_pattern(t, "EE")
     b = ev.connection_laplacian(v * 2, t)
-    assert t._cache[("pattern", "EE")] is pattern
+    assert kernels.cached_pattern(t, "EE") is pattern
     assert torch.equal(a.indices(), b.indices()) and b.is_coalesced()
     torch.testing.assert_close(b.values(), a.values())  # scale invariant (2D conformal)
     assert torch.equal(v, v0) and torch.equal(f, f0)
@@ -278,9 +280,9 @@ def test_bad_field_inputs(closed_mesh):
 @pytest.mark.parametrize("mesh", ["closed", "open", "tetrahedron"])
 def test_gather_patterns_match_the_generic_sorted_pattern(mesh):
     """The gather-only G (E, V) and vertex-pair (V, V) patterns equal the sort-and-sum Pattern."""
-    from torch_edgevf import operators as ops
-    from torch_edgevf._sparse import Pattern
-    from torch_edgevf.geometry import PAIR_A, PAIR_B
+    from torch_edgevf.operators import kernels
+    from torch_edgevf.operators.patterns import Pattern
+    from torch_edgevf.mesh.geometry import PAIR_A, PAIR_B
 
     if mesh == "closed":
         v, f = perturbed_icosphere(2, seed=1)
@@ -296,7 +298,7 @@ def test_gather_patterns_match_the_generic_sorted_pattern(mesh):
         "VV": Pattern(ff[:, PAIR_A], ff[:, PAIR_B], (t.num_vertices, t.num_vertices)),  # face-major
     }
     for name, reference in generic.items():
-        a, b = reference.assemble(x), ops._pattern(t, name).assemble(x)
+        a, b = reference.assemble(x), kernels.cached_pattern(t, name).assemble(x)
         assert a.shape == b.shape and b.is_coalesced()
         assert torch.equal(a.indices(), b.indices()), name
         torch.testing.assert_close(b.values(), a.values(), rtol=0, atol=1e-14)

@@ -1,19 +1,18 @@
 """Seamless parametrization from a cross field (thesis chapter 4)."""
 
-import math
 
 import numpy as np
 import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.param import comb, cut_graph, flipped_faces, parametrize, _tree_cumsum
-from torch_edgevf.singularities import face_frame_angles, singularities
-from torch_edgevf.topology import Topology
+from torch_edgevf.fields.param import comb, cut_graph, flipped_faces, parametrize, _tree_cumsum
+from torch_edgevf.fields.singularities import face_frame_angles, singularities
+from torch_edgevf.mesh.topology import Topology
 
 
 def cross_field(verts, faces):
-    from torch_edgevf.design import smoothest_field
+    from torch_edgevf.fields.design import smoothest_field
 
     return smoothest_field(verts, faces, n=4)
 

@@ -4,8 +4,8 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.poisson import GradientProjector, gradient_energy, gradient_projection_rhs, project_on_gradients
-from torch_edgevf.topology import Topology
+from torch_edgevf.fields.poisson import GradientProjector, gradient_energy, gradient_projection_rhs, project_on_gradients
+from torch_edgevf.mesh.topology import Topology
 
 
 def perturbed(level=2, scale=0.05, seed=0):

@@ -225,7 +225,7 @@ def test_renumbering_permutes_operators(mesh, seed, n):
 @props(8)
 @given(mesh=sphere_meshes(), seed=st.integers(0, 2 ** 31 - 1), n=st.sampled_from([1, 2, 4]))
 def test_singularities_sum_to_euler_characteristic_and_follow_renumbering(mesh, seed, n):
-    sing = pytest.importorskip("torch_edgevf.singularities")
+    sing = pytest.importorskip("torch_edgevf.fields.singularities")
     v, f = mesh
     topo = ev.Topology(f, v.shape[0])
     z = random_complex(topo.num_edges, seed % 10_000)

@@ -79,7 +79,7 @@ def test_field_png_shows_mesh_and_glyphs(sphere, tmp_path, n):
 
 
 def test_smoothest_field_png(sphere, tmp_path):
-    design = pytest.importorskip("torch_edgevf.design")
+    design = pytest.importorskip("torch_edgevf.fields.design")
     v, f, _ = sphere
     z = design.smoothest_field(v, f, 2)
     img = read_png(render.render_field(v, f, z, tmp_path / "line.png", n=2, size=SIZE, elev=35, azim=10))
@@ -146,7 +146,7 @@ def test_singularities_png_colours_by_sign(sphere, tmp_path):
 
 
 def test_singularities_of_a_field(sphere, tmp_path):
-    sing = pytest.importorskip("torch_edgevf.singularities")
+    sing = pytest.importorskip("torch_edgevf.fields.singularities")
     v, f, topo = sphere
     z = random_field(topo.num_edges, seed=1)
     s = sing.singularities(v, f, z, 1)
@@ -220,8 +220,8 @@ def test_errors(sphere, tmp_path):
 
 
 def test_parametrization_from_param_module(sphere, tmp_path):
-    param = pytest.importorskip("torch_edgevf.param")
-    design = pytest.importorskip("torch_edgevf.design")
+    param = pytest.importorskip("torch_edgevf.fields.param")
+    design = pytest.importorskip("torch_edgevf.fields.design")
     v, f, _ = sphere
     result = param.parametrize(v, f, design.smoothest_field(v, f, 4))
     img = read_png(render.render_parametrization(result.verts, result.faces, result.uv, tmp_path / "p.png",

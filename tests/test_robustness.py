@@ -26,7 +26,7 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.diagnose import diagnose
+from torch_edgevf.mesh.diagnose import diagnose
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MESHES = SHARED / "meshes"
@@ -40,11 +40,11 @@ PSB_ZERO_AREA_ID = 351  # a bearing with a zero-area face after decimation
 TIME_LIMIT_S = 180  # a 2,000-face mesh takes ~3 s (40 s for the needle-rich mech meshes under load)
 
 try:
-    from torch_edgevf.design import smoothest_field
+    from torch_edgevf.fields.design import smoothest_field
 except ImportError:  # pragma: no cover - design lands separately
     smoothest_field = None
 try:
-    from torch_edgevf.singularities import singularities
+    from torch_edgevf.fields.singularities import singularities
 except ImportError:  # pragma: no cover
     singularities = None
 
@@ -516,7 +516,7 @@ def test_valid_but_awkward_mesh_gives_finite_results(case):
     assert topo.num_components == expect.get("components", 1)
     assert topo.unreferenced_vertices.tolist() == expect.get("unreferenced", [])
     if not need:
-        pytest.skip("torch_edgevf.singularities is not available yet: index sums not checked")
+        pytest.skip("torch_edgevf.fields.singularities is not available yet: index sums not checked")
 
 
 def test_isolated_vertices_documented_behaviour():
@@ -548,7 +548,7 @@ def test_needle_operators_are_large_but_finite():
 def test_smoothest_field_converges_on_needle_rich_psb_mesh(caplog):
     """PSB 325 (mech) has faces of relative area 1e-8: the eigensolver must still converge."""
     if smoothest_field is None:
-        pytest.skip("torch_edgevf.design is not available")
+        pytest.skip("torch_edgevf.fields.design is not available")
     k = _psb_index(325)
     verts, faces, _, _ = psb_mesh(k)
     with caplog.at_level(logging.WARNING, logger="torch_edgevf"):

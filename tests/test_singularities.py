@@ -9,7 +9,7 @@ import scipy.sparse.linalg as sla
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.singularities import (
+from torch_edgevf.fields.singularities import (
     face_frame_angles,
     face_rotations,
     locate_singularities,
@@ -17,7 +17,7 @@ from torch_edgevf.singularities import (
     split_faces,
     split_singular_faces,
 )
-from torch_edgevf.topology import Topology
+from torch_edgevf.mesh.topology import Topology
 
 SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 
@@ -34,7 +34,7 @@ def _scipy(a: torch.Tensor) -> sp.csc_matrix:
 def smoothest_field(verts, faces, n: int = 1) -> torch.Tensor:
     """The smoothest n-field (thesis 3.1): library version if present, else SciPy."""
     try:
-        from torch_edgevf.design import smoothest_field as lib
+        from torch_edgevf.fields.design import smoothest_field as lib
     except ImportError:
         lib = None
     if lib is not None:

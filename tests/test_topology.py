@@ -5,7 +5,7 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.topology import Topology, remove_unreferenced_vertices
+from torch_edgevf.mesh.topology import Topology, remove_unreferenced_vertices
 
 from conftest import perturbed_grid, perturbed_icosphere
 
@@ -175,7 +175,7 @@ def test_fan_check_agrees_with_connected_components(case):
 @pytest.mark.parametrize("mesh", ["closed", "open"])
 def test_int64_work_arrays_give_the_same_topology_and_operators(mesh, monkeypatch):
     """Meshes too large for int32 work arrays take the int64 path; it must agree exactly."""
-    import torch_edgevf.topology as topology_module
+    import torch_edgevf.mesh.topology as topology_module
 
     v, f = perturbed_icosphere(1, seed=3) if mesh == "closed" else perturbed_grid(5, seed=3)
     small = Topology(f, num_vertices=v.shape[0])

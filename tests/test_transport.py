@@ -6,9 +6,8 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.fields import edge_frames
-from torch_edgevf.topology import Topology
-from torch_edgevf.transport import Transporter, transport
+from torch_edgevf.mesh.topology import Topology
+from torch_edgevf.fields.transport import Transporter, transport
 
 EZ = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
 
@@ -16,13 +15,12 @@ EZ = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
 def sphere(level):
     v, f = ev.icosphere(level)
     topo = Topology(f)
-    x, y, _ = edge_frames(v, topo)
     e = topo.edges
     p = (v[e[:, 0]] + v[e[:, 1]]) / 2
     p = p / p.norm(dim=1, keepdim=True)
 
     def to_edges(a):
-        return torch.complex((a * x).sum(1), (a * y).sum(1))
+        return ev.edges_from_vectors(v, topo, a)
 
     return v, topo, p, to_edges
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ._dtypes import complex_dtype
+
 _MAX_LISTED = 10
 
 
@@ -87,3 +89,25 @@ def check_vertex_count(verts: torch.Tensor, num_vertices: int) -> None:
         raise ValueError(
             f"verts has {verts.shape[0]} rows but the topology was built for {num_vertices} vertices"
         )
+
+
+def as_edge_field(z, topo, like: torch.Tensor, name: str = "z") -> torch.Tensor:
+    """Check and convert an edge field ``(E,)`` or ``(E, C)`` to the complex dtype of ``like``.
+
+    ``topo`` is anything with ``num_edges`` (a :class:`~torch_edgevf.mesh.topology.Topology`).
+    """
+    if not isinstance(z, torch.Tensor):
+        z = torch.as_tensor(z)
+    if z.dim() not in (1, 2) or z.shape[0] != topo.num_edges:
+        raise ValueError(
+            f"{name} must have shape (E,) or (E, C) with E = {topo.num_edges} edges, got {tuple(z.shape)}"
+        )
+    if not (z.is_complex() or z.is_floating_point()):
+        raise ValueError(f"{name} must be a floating or complex tensor, got {z.dtype}")
+    target = complex_dtype(like.dtype)
+    if z.is_complex() and z.dtype != target:
+        raise ValueError(f"{name} has dtype {z.dtype} but the mesh is {like.dtype}: expected {target}")
+    if not torch.isfinite(z.detach()).all():
+        bad = torch.nonzero(~torch.isfinite(z.detach()).reshape(z.shape[0], -1).all(1)).flatten().tolist()
+        raise ValueError(f"{name} has NaN or Inf values at edges {bad[:10]}")
+    return z.to(device=like.device, dtype=target)

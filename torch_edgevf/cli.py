@@ -7,10 +7,10 @@ import logging
 import sys
 import time
 
-import numpy as np
 import torch
 
 from .allocator import tune_allocator
+from .linalg import eigsh
 
 log = logging.getLogger("torch_edgevf")
 
@@ -48,24 +48,9 @@ def _load(path):
     return default_mesh() if path is None else load_mesh(path)
 
 
-def _scipy(a: torch.Tensor):
-    import scipy.sparse as sp
-
-    a = a.detach().coalesce()
-    i = a.indices().numpy()
-    return sp.csc_matrix((a.values().numpy(), (i[0], i[1])), shape=a.shape)
-
-
 def _smallest_eigenvalues(A, M, k):
-    """The k smallest generalized eigenvalues, with the library's solver when available."""
-    try:
-        from .linalg import eigsh
-    except ImportError:  # the solver package is optional during development
-        import scipy.sparse.linalg as spla
-
-        vals = spla.eigsh(_scipy(A), k=k, M=_scipy(M), sigma=-1e-6, return_eigenvectors=False)
-        return np.sort(vals.real)
-    return eigsh(A, M, k)[0].detach().numpy()
+    """The k smallest generalized eigenvalues of ``A x = lambda M x``."""
+    return eigsh(A, M, k).values.detach().numpy()
 
 
 def cmd_demo(args) -> int:
@@ -117,7 +102,7 @@ def _singularity_line(sing) -> str:
 
 
 def _design(mesh, n: int, align: str):
-    from .design import curvature_aligned_field, smoothest_field
+    from .fields.design import curvature_aligned_field, smoothest_field
 
     if align == "curvature":
         return curvature_aligned_field(mesh.verts, mesh.faces, n=n)
@@ -168,7 +153,7 @@ def cmd_singularities(args) -> int:
 
 
 def cmd_param(args) -> int:
-    from .param import parametrize
+    from .fields.param import parametrize
     from .render import render_parametrization
 
     step = _Progress(2, args.quiet)
@@ -186,7 +171,7 @@ def cmd_param(args) -> int:
 
 def cmd_bench(args) -> int:
     from . import EdgeOperators, icosphere, smoothest_field
-    from .topology import Topology
+    from .mesh.topology import Topology
 
     step = _Progress(len(args.levels) + 1, args.quiet)
     meshes = [("Spot (default mesh)", _load(None))]
@@ -213,7 +198,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_info(args) -> int:
-    from .diagnose import diagnose
+    from .mesh.diagnose import diagnose
 
     mesh = _load(args.mesh)
     print(mesh.report if hasattr(mesh, "report") else "")

@@ -222,7 +222,7 @@ def default_mesh(dtype: torch.dtype = torch.float64) -> MeshData:
     MeshData
         829 vertices, 1654 faces, closed genus-0 manifold.
     """
-    ref = resources.files(__package__ or "torch_edgevf").joinpath("data").joinpath(_DEFAULT_MESH)
+    ref = resources.files(__package__ or "torch_edgevf").joinpath("assets").joinpath(_DEFAULT_MESH)
     with resources.as_file(ref) as path:
         return load_mesh(path, dtype=dtype)
 
@@ -418,7 +418,7 @@ def edges_from_faces(faces) -> np.ndarray:
     -------
     edges : (E, 2) int64 array
         Pairs ``(i, j)`` with ``i < j`` in lexicographic order, the ordering of
-        :mod:`torch_edgevf.topology`.
+        :mod:`torch_edgevf.mesh.topology`.
     """
     f = faces.detach().cpu().numpy() if isinstance(faces, torch.Tensor) else np.asarray(faces)
     pairs = np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64), axis=1)

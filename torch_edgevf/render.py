@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from ._validation import as_faces, as_verts, check_vertex_count, list_some
-from .topology import Topology
+from .mesh.topology import Topology
 
 __all__ = [
     "Camera",
@@ -311,7 +311,7 @@ def face_glyph_directions(verts, faces, z, n: int = 1) -> torch.Tensor:
     -------
     (F, n, 3) tensor (the magnitude of each direction is ``|w_T|``).
     """
-    from .fields import face_directions
+    from .fields.representation import face_directions
 
     return face_directions(verts, faces, z, n)
 

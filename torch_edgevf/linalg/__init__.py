@@ -6,9 +6,9 @@ to a matrix are returned on its sparsity pattern, through its values.
 
 from .eigen import EigenPairs, eigsh
 from .expm import expm_multiply, implicit_euler
-from .factor import NotPositiveDefiniteError, SparseSolver, factorize
-from ._utils import sparse_matrix
-from .solve import solve, solve_constrained, solve_fixed
+from .factor import NotPositiveDefiniteError, factorize
+from ._utils import sparse_matrix, to_scipy
+from .solve import SparseSolver, solve, solve_constrained, solve_fixed
 
 __all__ = [
     "EigenPairs",
@@ -22,4 +22,5 @@ __all__ = [
     "solve_constrained",
     "solve_fixed",
     "sparse_matrix",
+    "to_scipy",
 ]

@@ -42,18 +42,17 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import torch
 
+from .._dtypes import complex_dtype, real_dtype
 from ._utils import (
     SparseData,
-    as_diagonal_or_sparse,
-    as_sparse,
+    as_matrix_pair,
     check_finite,
     check_rhs,
-    complex_dtype,
     from_numpy,
-    real_dtype,
     to_numpy,
 )
-from .factor import SparseSolver, factorize
+from .factor import factorize
+from .solve import SparseSolver
 
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(8)
 _PANEL_NORM = 4.0
@@ -183,13 +182,8 @@ class _ExpmMultiply(torch.autograd.Function):
 
 
 def _prepare(A, M, z0, t):
-    a_data = as_sparse(A, "A")
+    a_data, m_data = as_matrix_pair(A, M)
     n = a_data.n
-    if M is None:
-        M = torch.ones(n, dtype=real_dtype(a_data.dtype), device=a_data.values.device)
-    m_data = as_diagonal_or_sparse(M, n, "M")
-    if real_dtype(m_data.dtype) != real_dtype(a_data.dtype):
-        raise ValueError(f"M has dtype {m_data.dtype} but A has dtype {a_data.dtype}")
     check_rhs(z0, n, a_data.dtype, "z0")
     t = torch.as_tensor(t, dtype=real_dtype(a_data.dtype), device=z0.device)
     if t.numel() != 1 or t.is_complex():

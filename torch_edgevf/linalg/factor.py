@@ -57,9 +57,8 @@ import logging
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
-import torch
 
-from ._utils import as_sparse, is_hermitian
+from ._utils import is_hermitian
 
 logger = logging.getLogger(__name__)
 
@@ -331,65 +330,3 @@ def _log_no_cholespy():
                 "'torch_edgevf[cholespy]')")
 
 
-class SparseSolver:
-    r"""A sparse matrix factored once, for many solves.
-
-    Parameters
-    ----------
-    A : (N, N) sparse tensor
-        Real or complex; coalesced COO preferred.  Its values may require grad: solves
-        through :func:`torch_edgevf.linalg.solve` (or :meth:`solve`) then differentiate
-        with respect to them, on the sparsity pattern.
-    method : {"auto", "cholesky", "lu"}
-        See :func:`factorize`.  ``"auto"`` uses a Cholesky-type factorization for
-        Hermitian positive definite ``A`` (CHOLMOD if installed, else SuperLU symmetric
-        mode) and SuperLU LU otherwise.
-    hermitian : bool, optional
-        Declare ``A`` Hermitian (``A = A^H``); detected when ``None``.  For a Hermitian
-        matrix the adjoint solve reuses the factor as is.
-
-    Attributes
-    ----------
-    backend : str
-        ``"cholmod"``, ``"cholmod-cvxopt"``, ``"superlu-hermitian"`` or ``"superlu"`` (``"cholespy"``
-        only in the eigensolver).
-    hermitian : bool
-
-    Examples
-    --------
-    >>> solver = SparseSolver(L + 1e-3 * M)     # doctest: +SKIP
-    >>> x = solver.solve(b)                      # doctest: +SKIP
-    """
-
-    def __init__(self, A: torch.Tensor, method: str = "auto", hermitian: bool | None = None):
-        self.data = as_sparse(A, "A")
-        self.factor = factorize(self.data.to_scipy(), method, hermitian)
-        self.hermitian = self.factor.hermitian or bool(hermitian)
-        self.backend = self.factor.backend
-
-    @property
-    def n(self) -> int:
-        return self.data.n
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        return (self.data.n, self.data.n)
-
-    @property
-    def dtype(self) -> torch.dtype:
-        return self.data.dtype
-
-    def solve(self, b: torch.Tensor) -> torch.Tensor:
-        """``x = A^{-1} b`` for ``b`` of shape (N,) or (N, C); differentiable."""
-        from .solve import solve
-
-        return solve(self, b)
-
-    def solve_adjoint(self, b: torch.Tensor) -> torch.Tensor:
-        """``x = A^{-H} b`` with the same factor; differentiable."""
-        from .solve import solve
-
-        return solve(self, b, adjoint=True)
-
-    def __repr__(self) -> str:
-        return f"SparseSolver(n={self.n}, dtype={self.dtype}, backend={self.backend!r})"

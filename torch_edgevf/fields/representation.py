@@ -38,11 +38,10 @@ import math
 import numpy as np
 import torch
 
-from ._validation import check_n
-from ._validation import list_some
-from .geometry import FaceGeometry, _topology_and_verts, face_geometry, face_normals, vertex_normals
-from .operators import _complex_dtype, _edge_field
-from .topology import Topology
+from .._dtypes import complex_dtype
+from .._validation import as_edge_field, check_n, list_some
+from ..mesh.geometry import FaceGeometry, face_geometry, face_normals, topology_and_verts, vertex_normals
+from ..mesh.topology import Topology
 
 __all__ = [
     "nth_power",
@@ -57,6 +56,7 @@ __all__ = [
     "to_vectors",
     "point_vectors",
     "edge_vectors",
+    "edges_from_vectors",
     "face_vectors",
     "vertex_vectors",
     "edge_directions",
@@ -82,7 +82,7 @@ def _as_complex(z, name: str = "z") -> torch.Tensor:
     if z.is_complex():
         return z
     if z.is_floating_point():
-        return z.to(_complex_dtype(z.dtype))
+        return z.to(complex_dtype(z.dtype))
     raise ValueError(f"{name} must be a complex or floating tensor, got {z.dtype}")
 
 
@@ -164,7 +164,7 @@ def face_frames(verts, topo) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     -------
     X, Y, N : (F, 3) tensors, orthonormal per face.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     faces = topo.faces.to(verts.device)
     normal = face_normals(verts, topo)
     x = _normalize(verts[faces[:, 1]] - verts[faces[:, 0]])
@@ -182,7 +182,7 @@ def edge_frames(verts, topo) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     -------
     X, Y, N : (E, 3) tensors.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     e = topo.edges.to(verts.device)
     ef = topo.edge_faces.to(verts.device)
     nf = face_normals(verts, topo)
@@ -207,7 +207,7 @@ def face_edge_coefficients(verts, topo, n: int = 1, geom: FaceGeometry | None = 
     (F, 3) complex tensor.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo) if geom is None else geom
     return _face_edge_coefficients(geom, topo, n)
 
@@ -292,7 +292,7 @@ def interpolate(verts, topo, z, face_index, bary, n: int = 1) -> torch.Tensor:
     (P,) complex tensor.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     face_index, bary = _check_points(face_index, bary, topo, verts)
     u = _face_edge_coefficients(face_geometry(verts, topo), topo, n)[face_index]
@@ -301,7 +301,7 @@ def interpolate(verts, topo, z, face_index, bary, n: int = 1) -> torch.Tensor:
 
 
 def _edge_vector(z, topo: Topology, verts: torch.Tensor, name: str = "z") -> torch.Tensor:
-    z = _edge_field(z, topo, verts, name)
+    z = as_edge_field(z, topo, verts, name)
     if z.dim() != 1:
         raise ValueError(f"{name} must have shape (E,) with E = {topo.num_edges}, got {tuple(z.shape)}")
     return z
@@ -320,7 +320,7 @@ def face_values(verts, topo, z, n: int = 1) -> torch.Tensor:
     (F,) complex tensor.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     u = _face_edge_coefficients(face_geometry(verts, topo), topo, n)
     return (u * z[topo.face_edges.to(verts.device)]).sum(1) / 3
@@ -328,7 +328,7 @@ def face_values(verts, topo, z, n: int = 1) -> torch.Tensor:
 
 def point_vectors(verts, topo, z, face_index, bary) -> torch.Tensor:
     """(P, 3) 3D vectors of a vector field (``n = 1``) at points inside faces."""
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     w = interpolate(verts, topo, z, face_index, bary)
     x, y, _ = face_frames(verts, topo)
     idx = torch.as_tensor(face_index, device=verts.device).to(torch.int64)
@@ -337,15 +337,43 @@ def point_vectors(verts, topo, z, face_index, bary) -> torch.Tensor:
 
 def edge_vectors(verts, topo, z) -> torch.Tensor:
     """(E, 3) 3D vectors ``Re(z) X_e + Im(z) Y_e`` of a vector field at edge midpoints."""
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     x, y, _ = edge_frames(verts, topo)
     return to_vectors(x, y, z)
 
 
+def edges_from_vectors(verts, topo, vectors) -> torch.Tensor:
+    """The edge field of ambient vectors at edge midpoints: the inverse of :func:`edge_vectors`.
+
+    .. math::  z_e = \\langle v_e, X_e \\rangle + \\imath \\langle v_e, Y_e \\rangle
+
+    with the edge frames ``X_e, Y_e`` of :func:`edge_frames`: the projection of ``v_e`` on
+    the tangent plane at the edge midpoint (its component along ``N_e`` is dropped), so
+    ``edges_from_vectors(verts, topo, edge_vectors(verts, topo, z)) == z``.
+
+    Parameters
+    ----------
+    vectors : (E, 3) real tensor, one vector per edge in the order of ``topo.edges``
+
+    Returns
+    -------
+    (E,) complex tensor, in the complex dtype of ``verts``.
+    """
+    verts, topo = topology_and_verts(verts, topo)
+    vectors = torch.as_tensor(vectors)
+    if vectors.shape != (topo.num_edges, 3):
+        raise ValueError(f"vectors must have shape (E, 3) with E = {topo.num_edges}, got {tuple(vectors.shape)}")
+    if not vectors.is_floating_point():
+        raise ValueError(f"vectors must be a real floating tensor, got {vectors.dtype}")
+    vectors = vectors.to(device=verts.device, dtype=verts.dtype)
+    x, y, _ = edge_frames(verts, topo)
+    return torch.complex((vectors * x).sum(1), (vectors * y).sum(1))
+
+
 def face_vectors(verts, topo, z) -> torch.Tensor:
     """(F, 3) 3D vectors of a vector field at face barycenters (:func:`face_values`)."""
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     x, y, _ = face_frames(verts, topo)
     return to_vectors(x, y, face_values(verts, topo, z))
 
@@ -357,7 +385,7 @@ def vertex_vectors(verts, topo, z) -> torch.Tensor:
     the 3D frame of :func:`vertex_frames`, whose angles match the rescaled ones only up to
     the rescaling (exactly where the angle defect is zero).
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     x, y, _ = vertex_frames(verts, topo)
     return to_vectors(x, y, edges_to_vertices(verts, topo, z))
 
@@ -375,7 +403,7 @@ def edge_directions(verts, topo, z, n: int) -> torch.Tensor:
     direction 0 turned by ``2 pi k / n``.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     x, y, _ = edge_frames(verts, topo)
     return _directions(x, y, z, n)
@@ -384,7 +412,7 @@ def edge_directions(verts, topo, z, n: int) -> torch.Tensor:
 def face_directions(verts, topo, z, n: int) -> torch.Tensor:
     """(F, n, 3) the ``n`` directions at face barycenters (root of :func:`face_values`)."""
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     x, y, _ = face_frames(verts, topo)
     return _directions(x, y, face_values(verts, topo, z, n), n)
 
@@ -392,7 +420,7 @@ def face_directions(verts, topo, z, n: int) -> torch.Tensor:
 def point_directions(verts, topo, z, face_index, bary, n: int) -> torch.Tensor:
     """(P, n, 3) the ``n`` directions at points inside faces (root of :func:`interpolate`)."""
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     w = interpolate(verts, topo, z, face_index, bary, n)
     x, y, _ = face_frames(verts, topo)
     idx = torch.as_tensor(face_index, device=verts.device).to(torch.int64)
@@ -402,7 +430,7 @@ def point_directions(verts, topo, z, face_index, bary, n: int) -> torch.Tensor:
 def vertex_directions(verts, topo, z, n: int) -> torch.Tensor:
     """(V, n, 3) the ``n`` directions at vertices (root of :func:`edges_to_vertices`)."""
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     x, y, _ = vertex_frames(verts, topo)
     return _directions(x, y, edges_to_vertices(verts, topo, z, n), n)
 
@@ -481,7 +509,7 @@ def _vertex_fans(topo: Topology):
             "pairs_second": pairs_second,
         }
 
-    return topo.cached(("fields", "vertex_fans"), build)
+    return topo.cached("fields.vertex_fans", build)
 
 
 def vertex_transport(verts, topo, n: int = 1) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -511,7 +539,7 @@ def vertex_transport(verts, topo, n: int = 1) -> tuple[torch.Tensor, torch.Tenso
     r : (P,) complex tensor ``r_ve ** n``
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     return _vertex_transport(verts, topo, n)
 
 
@@ -559,7 +587,7 @@ def vertex_frames(verts, topo) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor
     -------
     X, Y, N : (V, 3) tensors.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     fans = _vertex_fans(topo)
     normal = vertex_normals(verts, topo)
     start = torch.from_numpy(fans["start"]).to(verts.device)
@@ -590,7 +618,7 @@ def edges_to_vertices(verts, topo, z, n: int = 1) -> torch.Tensor:
     (V,) complex tensor.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     pv, pe, r = _vertex_transport(verts, topo, n)
     acc = z.new_zeros(topo.num_vertices).index_add(0, pv, r.conj() * z[pe])
@@ -612,11 +640,11 @@ def vertices_to_edges(verts, topo, zv, n: int = 1) -> torch.Tensor:
     (E,) complex tensor.
     """
     n = check_n(n)
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     zv = _as_complex(zv, "zv")
     if zv.shape != (topo.num_vertices,):
         raise ValueError(f"zv must have shape ({topo.num_vertices},), got {tuple(zv.shape)}")
-    target = _complex_dtype(verts.dtype)
+    target = complex_dtype(verts.dtype)
     if zv.dtype != target:
         raise ValueError(f"zv has dtype {zv.dtype} but the mesh is {verts.dtype}: expected {target}")
     zv = zv.to(verts.device)
@@ -640,7 +668,7 @@ def to_one_form(verts, topo, z, orthogonal: bool = False) -> torch.Tensor:
     -------
     (E,) real tensor.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     z = _edge_vector(z, topo, verts)
     e = topo.edges.to(verts.device)
     length = torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
@@ -663,7 +691,7 @@ def from_one_form(verts, topo, c, c_perp=None) -> torch.Tensor:
     -------
     (E,) complex tensor.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     e = topo.edges.to(verts.device)
     length = torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
 

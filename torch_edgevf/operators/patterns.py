@@ -15,8 +15,11 @@ import sys
 import numpy as np
 import torch
 
+from ..linalg import sparse_matrix
+from ..mesh.topology import unique_pairs
+
 __all__ = ["Pattern", "EdgePairPattern", "EdgeVertexPattern", "VertexPairPattern", "sparse_coo", "diagonal",
-           "unique_pairs", "symmetric_layout"]
+           "symmetric_layout", "index_dtype"]
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
@@ -26,9 +29,7 @@ def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tens
     (:func:`torch_edgevf.linalg.sparse_matrix`) instead of torch's ``sparse_mask``.
     """
     if values.requires_grad and torch.is_grad_enabled():
-        from .linalg._utils import _SparseMatrix
-
-        return _SparseMatrix.apply(indices, values, (int(shape[0]), int(shape[1])))
+        return sparse_matrix(indices, values, (int(shape[0]), int(shape[1])), assume_sorted=True)
     return torch.sparse_coo_tensor(
         indices, values, tuple(shape), is_coalesced=True, check_invariants=False
     )
@@ -83,7 +84,7 @@ class Pattern(_OnDevice):
         unique, target = unique_pairs(rows, cols, self.shape[1], self.shape[0])
         self.nnz = int(unique.shape[0])
         self.num_contributions = int(rows.shape[0])
-        index = _index_dtype(self.num_contributions)
+        index = index_dtype(self.num_contributions)
         row = unique // self.shape[1]
         self._indices = torch.from_numpy(np.stack([row, unique - row * self.shape[1]]))
         # assembly = gather the first contribution of every nonzero, then add the others
@@ -108,43 +109,7 @@ class Pattern(_OnDevice):
         return sparse_coo(indices, out, self.shape)
 
 
-def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None,
-                 index_dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted unique keys ``lo * nv + hi`` of integer pairs and the index of each pair's key.
-
-    ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``). The keys are int64; the
-    indices have ``index_dtype``.
-
-    When they fit, the key and the pair's position are packed into one int64 so that
-    a plain in-place sort (about 3x faster than an argsort) gives both the order and the keys.
-    """
-    keys = np.asarray(lo).astype(np.int64)  # a copy: worked on in place below
-    keys *= nv
-    keys += np.asarray(hi)
-    n = keys.shape[0]
-    if n == 0:
-        return keys, np.zeros(0, dtype=index_dtype)
-    shift = max(int(n - 1).bit_length(), 1)
-    if (nv if num_lo is None else num_lo) * nv <= 2 ** (63 - shift):
-        keys <<= shift
-        keys |= np.arange(n, dtype=np.int64)
-        keys.sort()
-        order = keys & ((1 << shift) - 1)
-        keys >>= shift
-    else:
-        order = np.argsort(keys)
-        keys = keys[order]
-    new = np.empty(n, dtype=bool)
-    new[0] = True
-    np.not_equal(keys[1:], keys[:-1], out=new[1:])
-    ids = np.cumsum(new, dtype=index_dtype)
-    ids -= 1
-    inverse = np.empty(n, dtype=index_dtype)
-    inverse[order] = ids
-    return keys[new], inverse
-
-
-def _index_dtype(size: int):
+def index_dtype(size: int):
     """int32 indices where they fit (half the memory of int64), else int64."""
     return np.int32 if size < 2**31 - 1 else np.int64
 
@@ -207,7 +172,7 @@ class EdgePairPattern(_OnDevice):
                 keys[missing, 1 + 2 * side] = keys[missing, 2 + 2 * side] = ne << 32  # sorts last
         del nxt, prv
         keys.sort(axis=1)
-        index = _index_dtype(ne + 6 * nf)
+        index = index_dtype(ne + 6 * nf)
         if sys.byteorder == "little":  # the low halves of the keys, without a temporary
             gather = keys.view(np.uint32)[:, 0::2].astype(index)
         else:
@@ -223,7 +188,7 @@ class EdgePairPattern(_OnDevice):
         # diagonal: the face-major corner of each side of every edge, 3F (a zero) if none
         diag_src = sc if closed else np.where(sc >= 0, sc, 3 * nf)
         self._diag = tuple(
-            torch.from_numpy(np.ascontiguousarray(diag_src[:, side]).astype(_index_dtype(3 * nf + 1), copy=False))
+            torch.from_numpy(np.ascontiguousarray(diag_src[:, side]).astype(index_dtype(3 * nf + 1), copy=False))
             for side in (0, 1)
         )
 
@@ -291,7 +256,7 @@ def symmetric_layout(up_row: np.ndarray, up_col: np.ndarray, has_diag: np.ndarra
     row_len = n_lower + has_diag + n_upper
     row_start = np.cumsum(row_len) - row_len
     nnz = int(row_len.sum())
-    gather = np.empty(nnz, dtype=_index_dtype(nv + 2 * nu))
+    gather = np.empty(nnz, dtype=index_dtype(nv + 2 * nu))
     out_cols = np.empty(nnz, dtype=np.int64)
     diag = np.flatnonzero(has_diag)
     diag_pos = (row_start + n_lower)[diag]
@@ -396,7 +361,7 @@ class EdgeVertexPattern(_OnDevice):
             valid = indices[1] < nv
             indices, first, second = indices[:, valid], first.ravel()[valid], second.ravel()[valid]
         self._indices = torch.from_numpy(indices)
-        self._sources = _first_and_rest(first, second, none, _index_dtype(9 * nf + 1))
+        self._sources = _first_and_rest(first, second, none, index_dtype(9 * nf + 1))
         self.nnz = int(indices.shape[1])
         self.num_contributions = 9 * nf
 
@@ -441,7 +406,7 @@ class VertexPairPattern(_OnDevice):
 
         # side 0: corner k + 1 is i, k + 2 is j; side 1 the reverse
         ij, ji = term(nxt, prv), term(prv, nxt)
-        index = _index_dtype(9 * nf + 1)
+        index = index_dtype(9 * nf + 1)
         # [upper (i, j) | lower (j, i)] entries, each the sum of a term of each face
         self._pairs = _first_and_rest(np.concatenate([ij[:, 0], ji[:, 0]]), np.concatenate([ji[:, 1], ij[:, 1]]),
                                       none, index)

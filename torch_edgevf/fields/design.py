@@ -62,14 +62,15 @@ import math
 import numpy as np
 import torch
 
-from ._validation import check_n
-from . import operators as ops
-from ._sparse import Pattern, sparse_coo
-from ._validation import as_verts, check_vertex_count, list_some
-from .fields import nth_power, _as_complex
-from .geometry import dihedral_angles, edge_lengths, face_geometry
-from .linalg import SparseSolver, eigsh, expm_multiply, solve
-from .topology import Topology
+from .._dtypes import complex_dtype
+from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, list_some
+from ..linalg import SparseSolver, eigsh, expm_multiply, solve
+from ..mesh.geometry import dihedral_angles, edge_lengths, face_geometry
+from ..mesh.topology import Topology
+from ..operators import functional as ops
+from ..operators import kernels
+from ..operators.patterns import Pattern, diagonal, sparse_coo
+from .representation import _as_complex, nth_power
 
 __all__ = [
     "FieldDesigner",
@@ -106,7 +107,7 @@ class FieldDesigner:
     Parameters
     ----------
     verts : (V, 3) float tensor
-    faces : (F, 3) integer tensor, or a :class:`~torch_edgevf.topology.Topology`
+    faces : (F, 3) integer tensor, or a :class:`~torch_edgevf.mesh.topology.Topology`
     n : int >= 1
         Symmetry order: the designed ``z`` are representation vectors of ``n``-direction
         fields (``n = 1`` vector fields, ``2`` line fields, ``4`` cross fields).
@@ -137,7 +138,7 @@ class FieldDesigner:
         geom = face_geometry(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         self._geom, self._signs = geom, signs
-        self.mass = ops._mass_values(geom, topo)
+        self.mass = kernels.mass_values(geom, topo)
         self.laplacian = self._laplacian(self.n)
         self.mean_edge_length = edge_lengths(verts, topo).mean()
         self._solvers: dict = {}
@@ -151,13 +152,13 @@ class FieldDesigner:
 
     @property
     def complex_dtype(self) -> torch.dtype:
-        return ops._complex_dtype(self.verts.dtype)
+        return complex_dtype(self.verts.dtype)
 
     def _laplacian(self, n: int) -> torch.Tensor:
-        return ops._connection_laplacian_from(self._geom, self._signs, self.topology, n)
+        return kernels.connection_laplacian_from(self._geom, self._signs, self.topology, n)
 
     def _mass_matrix(self) -> torch.Tensor:
-        return ops.diagonal(self.mass.to(self.complex_dtype))
+        return diagonal(self.mass.to(self.complex_dtype))
 
     def _solver(self, key, build) -> SparseSolver:
         if key not in self._solvers:
@@ -166,7 +167,7 @@ class FieldDesigner:
         return self._solvers[key]
 
     def _field(self, z, name: str) -> torch.Tensor:
-        return ops._edge_field(z, self.topology, self.verts, name)
+        return as_edge_field(z, self.topology, self.verts, name)
 
     def norm(self, z) -> torch.Tensor:
         """The ``M_z`` norm ``sqrt(z^H M_z z)`` of an edge field (the field's L2 norm)."""
@@ -202,12 +203,12 @@ class FieldDesigner:
         """``real_form(L_c) + mu_curl L_curl + mu_div L_div`` (2E, 2E), thesis 3.3."""
         a = ops.real_form(self.laplacian)
         if mu_curl or mu_div:
-            block, ne = ops._curl_energy_block(self.verts, self.topology)
+            block, ne = kernels.curl_energy_block(self.verts, self.topology)
             parts = [a]
             if mu_curl:
-                parts.append(mu_curl * ops._embed(block, 0, 2 * ne))
+                parts.append(mu_curl * kernels.embed_block(block, 0, 2 * ne))
             if mu_div:
-                parts.append(mu_div * ops._embed(block, ne, 2 * ne))
+                parts.append(mu_div * kernels.embed_block(block, ne, 2 * ne))
             a = _sum_sparse(parts)
         return a
 
@@ -293,7 +294,7 @@ class FieldDesigner:
         a = self._real_system(mu_curl, mu_div)
         m2 = torch.cat([self.mass, self.mass])
         if lam:
-            a = _sum_sparse([a, ops.diagonal(-lam * m2)])
+            a = _sum_sparse([a, diagonal(-lam * m2)])
         dtype = self.verts.dtype
         p_row, p_col, p_val, x_fixed, m = plan["rows"], plan["cols"], plan["coef"], plan["x_fixed"], plan["m"]
         a = a.coalesce()
@@ -416,7 +417,7 @@ class FieldDesigner:
         """``L_c + shift M_z`` on the pattern of ``L_c``."""
         if shift == 0:
             return self.laplacian
-        return _sum_sparse([self.laplacian, ops.diagonal((shift * self.mass).to(self.complex_dtype))])
+        return _sum_sparse([self.laplacian, diagonal((shift * self.mass).to(self.complex_dtype))])
 
     # ------------------------------------------------------------------ heat diffusion (3.2)
 
@@ -465,7 +466,7 @@ class FieldDesigner:
     def _heat_matrix(self, dt: torch.Tensor) -> torch.Tensor:
         lap = self.laplacian
         scaled = sparse_coo(lap.indices(), dt * lap.values(), lap.shape)
-        return _sum_sparse([scaled, ops.diagonal(self.mass.to(self.complex_dtype))])
+        return _sum_sparse([scaled, diagonal(self.mass.to(self.complex_dtype))])
 
     # ------------------------------------------------------------------ curvature (3.4)
 

@@ -20,17 +20,41 @@ characteristic. Use :func:`remove_unreferenced_vertices` to drop them.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cached_property
+from typing import Literal, TypeVar
 
 import numpy as np
 import scipy.sparse as sp
 import torch
 from scipy.sparse.csgraph import connected_components
 
-from ._sparse import unique_pairs
-from ._validation import as_faces, list_some
+from .._validation import as_faces, list_some
 
 __all__ = ["Topology", "remove_unreferenced_vertices"]
+
+__all__ = ["Topology", "remove_unreferenced_vertices", "unique_pairs", "DerivedKey"]
+
+_T = TypeVar("_T")
+
+#: The keys of :meth:`Topology.cached`: data derived from the faces alone by the layers
+#: above, built on first use and kept for the life of the topology.
+#:
+#: ========================  ==============================================================
+#: key                       value
+#: ========================  ==============================================================
+#: ``"pattern.EE"``          :class:`~torch_edgevf.operators.patterns.EdgePairPattern` (E, E)
+#: ``"pattern.EV"``          :class:`~torch_edgevf.operators.patterns.EdgeVertexPattern` (E, V)
+#: ``"pattern.VV"``          :class:`~torch_edgevf.operators.patterns.VertexPairPattern` (V, V)
+#: ``"pattern.FE"``          :class:`~torch_edgevf.operators.patterns.Pattern` (F, E)
+#: ``"plan.laplace_beltrami"``  dict of index tensors, :func:`~torch_edgevf.operators.kernels.laplace_beltrami_plan`
+#: ``"fields.vertex_fans"``  tuple of index tensors, the vertex fans of :mod:`torch_edgevf.fields.representation`
+#: ========================  ==============================================================
+#:
+#: Nothing that depends on vertex positions is kept on a topology.
+DerivedKey = Literal[
+    "pattern.EE", "pattern.EV", "pattern.VV", "pattern.FE", "plan.laplace_beltrami", "fields.vertex_fans"
+]
 
 _NEXT = np.array([1, 2, 0])
 _PREV = np.array([2, 0, 1])
@@ -126,7 +150,7 @@ class Topology:
         self.unreferenced_vertices = torch.from_numpy(np.flatnonzero(~referenced))
         self.euler_characteristic = int(referenced.sum()) - int(ne) + int(nf)
         self._referenced = referenced
-        self._cache: dict = {}
+        self._derived: dict[DerivedKey, object] = {}
 
     # The int64 index tensors, made on first use (a first assembly of L_c needs none of them).
 
@@ -161,6 +185,14 @@ class Topology:
         sc = self._side_corners
         return torch.from_numpy(np.where(sc >= 0, sc % 3, -1).astype(np.int64))
 
+    def compact_faces(self) -> np.ndarray:
+        """(F, 3) int array: :attr:`faces`, int32 where the mesh allows, else int64; do not modify."""
+        return self._faces
+
+    def compact_face_edges(self) -> np.ndarray:
+        """(F, 3) int array: :attr:`face_edges`, int32 where the mesh allows, else int64; do not modify."""
+        return self._face_edges
+
     def side_corners(self) -> np.ndarray:
         """(E, 2) int array: the corner ``3 f + k`` opposite each side of every edge, -1 if none.
 
@@ -171,34 +203,40 @@ class Topology:
 
     def edge_faces_t(self) -> torch.Tensor:
         """(2, E) contiguous index tensor: ``edge_faces.t()``, int32 where the mesh allows (cached)."""
-        return self.cached("edge_faces_t", lambda: torch.from_numpy(np.ascontiguousarray(self._side_corners.T // 3)))
+        return self._edge_faces_t
+
+    @cached_property
+    def _edge_faces_t(self) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(self._side_corners.T // 3))
 
     def corner_vertices(self) -> torch.Tensor:
         """(3, F) contiguous index tensor: ``faces.t()``, int32 where the mesh allows (cached)."""
-        return self.cached("corner_vertices", lambda: torch.from_numpy(np.ascontiguousarray(self._faces.T)))
+        return self._corner_vertices
+
+    @cached_property
+    def _corner_vertices(self) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(self._faces.T))
 
     @property
     def components(self) -> torch.Tensor:
         """(V,) int64 connected-component label per vertex, ``-1`` if unreferenced (computed on first use)."""
-        return self._components()[0]
+        return self._components[0]
 
     @property
     def num_components(self) -> int:
         """Number of connected components (computed on first use)."""
-        return self._components()[1]
+        return self._components[1]
 
+    @cached_property
     def _components(self) -> tuple[torch.Tensor, int]:
-        def build():
-            nv, ne = self.num_vertices, self.num_edges
-            edges = self.edges.numpy()
-            graph = sp.coo_matrix((np.ones(ne), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
-            _, labels = connected_components(graph, directed=False)
-            referenced = self._referenced
-            labels = np.where(referenced, labels, -1)
-            _, labels[referenced] = np.unique(labels[referenced], return_inverse=True)
-            return torch.from_numpy(labels.astype(np.int64)), int(labels.max()) + 1
-
-        return self.cached("components", build)
+        nv, ne = self.num_vertices, self.num_edges
+        edges = self.edges.numpy()
+        graph = sp.coo_matrix((np.ones(ne), (edges[:, 0], edges[:, 1])), shape=(nv, nv))
+        _, labels = connected_components(graph, directed=False)
+        referenced = self._referenced
+        labels = np.where(referenced, labels, -1)
+        _, labels[referenced] = np.unique(labels[referenced], return_inverse=True)
+        return torch.from_numpy(labels.astype(np.int64)), int(labels.max()) + 1
 
     @property
     def is_closed(self) -> bool:
@@ -235,11 +273,15 @@ class Topology:
         items = ", ".join(f"{k}={v}" for k, v in self.summary().items())
         return f"Topology({items})"
 
-    def cached(self, key, build):
-        """Return ``self._cache[key]``, computing it with ``build()`` the first time."""
-        if key not in self._cache:
-            self._cache[key] = build()
-        return self._cache[key]
+    def cached(self, key: DerivedKey, build: Callable[[], _T]) -> _T:
+        """The derived data ``key`` (see :data:`DerivedKey`), computed with ``build()`` the first time.
+
+        For the layers above: data that depends on the faces alone (sparsity patterns,
+        assembly plans), so that re-assembly for new positions needs no sort.
+        """
+        if key not in self._derived:
+            self._derived[key] = build()
+        return self._derived[key]  # type: ignore[return-value]
 
 
 def remove_unreferenced_vertices(verts: torch.Tensor, faces) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -409,3 +451,39 @@ def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
     pillow[chain] = False
     if pillow.any():
         _check_duplicate_faces(f)
+
+
+def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None,
+                 index_dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique keys ``lo * nv + hi`` of integer pairs and the index of each pair's key.
+
+    ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``). The keys are int64; the
+    indices have ``index_dtype``.
+
+    When they fit, the key and the pair's position are packed into one int64 so that
+    a plain in-place sort (about 3x faster than an argsort) gives both the order and the keys.
+    """
+    keys = np.asarray(lo).astype(np.int64)  # a copy: worked on in place below
+    keys *= nv
+    keys += np.asarray(hi)
+    n = keys.shape[0]
+    if n == 0:
+        return keys, np.zeros(0, dtype=index_dtype)
+    shift = max(int(n - 1).bit_length(), 1)
+    if (nv if num_lo is None else num_lo) * nv <= 2 ** (63 - shift):
+        keys <<= shift
+        keys |= np.arange(n, dtype=np.int64)
+        keys.sort()
+        order = keys & ((1 << shift) - 1)
+        keys >>= shift
+    else:
+        order = np.argsort(keys)
+        keys = keys[order]
+    new = np.empty(n, dtype=bool)
+    new[0] = True
+    np.not_equal(keys[1:], keys[:-1], out=new[1:])
+    ids = np.cumsum(new, dtype=index_dtype)
+    ids -= 1
+    inverse = np.empty(n, dtype=index_dtype)
+    inverse[order] = ids
+    return keys[new], inverse

@@ -11,12 +11,13 @@ be built from positions (:func:`face_geometry`) or from edge lengths alone
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from ._validation import as_faces, as_verts, check_vertex_count, list_some
+from .._validation import as_faces, as_verts, check_vertex_count, list_some
 from .topology import Topology
 
 __all__ = [
@@ -112,6 +113,13 @@ def _checked(geom: FaceGeometry) -> FaceGeometry:
     return geom
 
 
+#: The last geometry computed without autograd for each topology, with the positions it
+#: was computed from: a memo of :func:`face_geometry` for repeated calls on the same
+#: positions (e.g. several operators of one mesh). Held beside the topology, not on it,
+#: and dropped with it.
+_LAST_GEOMETRY: weakref.WeakKeyDictionary[Topology, tuple[torch.Tensor, FaceGeometry]] = weakref.WeakKeyDictionary()
+
+
 def face_geometry(verts, faces) -> FaceGeometry:
     """Per-face lengths, doubled areas and corner dot products from vertex positions.
 
@@ -136,7 +144,7 @@ def face_geometry(verts, faces) -> FaceGeometry:
     # (compared by value, so in-place edits of any kind are seen).
     cacheable = topo is not None and not (torch.is_grad_enabled() and verts.requires_grad)
     if cacheable:
-        cached = topo._cache.get("geometry")
+        cached = _LAST_GEOMETRY.get(topo)
         if cached is not None and _same_values(cached[0], verts):
             return cached[1]
     if topo is not None and verts.shape[0] >= topo.num_vertices:
@@ -168,7 +176,7 @@ def face_geometry(verts, faces) -> FaceGeometry:
     dots = -torch.stack([dot(2, 1), dot(0, 2), dot(1, 0)])
     geom = _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
     if cacheable:
-        topo._cache["geometry"] = (verts.detach().clone(), geom)
+        _LAST_GEOMETRY[topo] = (verts.detach().clone(), geom)
     return geom
 
 
@@ -176,7 +184,7 @@ def _same_values(a: torch.Tensor, b: torch.Tensor) -> bool:
     return a.dtype == b.dtype and a.device == b.device and a.shape == b.shape and torch.equal(a, b.detach())
 
 
-def _topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
+def topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
     if not isinstance(topo, Topology):
         topo = Topology(topo, num_vertices=None if not hasattr(verts, "shape") else verts.shape[0])
     verts = as_verts(verts)
@@ -186,7 +194,7 @@ def _topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
 
 def edge_lengths(verts, topo) -> torch.Tensor:
     """(E,) edge lengths ``|v_j - v_i|`` in the order of ``topo.edges``."""
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     e = topo.edges.to(verts.device)
     return torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
 
@@ -218,7 +226,7 @@ def face_normals(verts, faces) -> torch.Tensor:
 
 def vertex_normals(verts, topo) -> torch.Tensor:
     """(V, 3) angle-weighted unit vertex normals (zero rows at unreferenced vertices)."""
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo)
     nf = face_normals(verts, topo)
     faces = topo.faces.to(verts.device)
@@ -243,7 +251,7 @@ def transport_coefficients(verts, topo, n: int = 1, geom: FaceGeometry | None = 
     -------
     (F, 3, 3) complex tensor ``r[f, a, b] ** n``.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo) if geom is None else geom
     return pair_transport(geom, topo.face_edge_signs.to(verts.device), n).reshape(-1, 3, 3)
 
@@ -256,7 +264,7 @@ def pair_columns(x: torch.Tensor, which: str) -> torch.Tensor:
     return x.index_select(1, _PAIR_INDEX[which].to(x.device))
 
 
-def _int_power(u: torch.Tensor, n: int) -> torch.Tensor:
+def int_power(u: torch.Tensor, n: int) -> torch.Tensor:
     """``u ** n`` for an integer ``n >= 0`` by repeated squaring (differentiable)."""
     result, base = None, u
     while n:
@@ -281,7 +289,7 @@ def pair_transport(geom: FaceGeometry, signs: torch.Tensor, n: int = 1) -> torch
     im = sigma * geom.double_area[:, None] / denom
     s = signs.to(dtype)
     sign = torch.where(off, -pair_columns(s, "a") * pair_columns(s, "b"), 1.0) ** n
-    return _int_power(torch.complex(re, im), n) * sign
+    return int_power(torch.complex(re, im), n) * sign
 
 
 def dihedral_angles(verts, topo) -> torch.Tensor:
@@ -292,7 +300,7 @@ def dihedral_angles(verts, topo) -> torch.Tensor:
 
     .. math::  \\beta_e = \\operatorname{atan2}(t \\cdot (n_L \\times n_R), n_L \\cdot n_R).
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     nf = face_normals(verts, topo)
     ef = topo.edge_faces.to(verts.device)
     interior = (ef >= 0).all(dim=1)
@@ -310,7 +318,7 @@ def angle_defects(verts, topo) -> torch.Tensor:
 
     Unreferenced vertices get 0. On a closed mesh the sum is ``2 pi chi`` (Gauss-Bonnet).
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo)
     faces = topo.faces.to(verts.device)
     total = verts.new_zeros(topo.num_vertices).index_add(0, faces.flatten(), geom.angles.flatten())

@@ -3,8 +3,8 @@
 Steps, as in the thesis:
 
 1. *(given)* a smooth cross field ``z`` (``n = 4`` representation vector), e.g. from
-   :func:`torch_edgevf.design.curvature_aligned_field`;
-2. *singularities* (:func:`torch_edgevf.singularities.singularities`); face singularities
+   :func:`torch_edgevf.fields.design.curvature_aligned_field`;
+2. *singularities* (:func:`torch_edgevf.fields.singularities.singularities`); face singularities
    are moved to new vertices by a 1-to-3 split at their exact location (thesis 4.1, B.2);
 3. *cut and comb*: a breadth-first spanning tree of the dual graph; the primal edges it
    does not cross form a cut graph, pruned of dangling branches that end at regular
@@ -50,10 +50,10 @@ import scipy.sparse.csgraph as csg
 import scipy.sparse.linalg as sla
 import torch
 
-from .geometry import _topology_and_verts, mean_edge_length
-from .operators import _edge_field
+from .._validation import as_edge_field
+from ..mesh.geometry import mean_edge_length, topology_and_verts
+from ..mesh.topology import Topology
 from .singularities import face_frame_angles, singularities, split_singular_faces
-from .topology import Topology
 
 __all__ = ["CutGraph", "cut_graph", "comb", "Combing", "parametrize", "Parametrization", "flipped_faces"]
 
@@ -153,7 +153,7 @@ def cut_graph(verts, faces, keep_vertices=None) -> CutGraph:
     keep_vertices : (V,) bool array or index list, vertices the cut must reach (the
         singularities); ``None`` prunes to the homology generators only.
     """
-    verts, topo = _topology_and_verts(verts, faces)
+    verts, topo = topology_and_verts(verts, faces)
     parent, parent_edge, order, tree = _dual_tree(topo)
     interior = ~topo.boundary_edges.numpy()
     cut = interior & ~tree
@@ -173,7 +173,7 @@ class Combing:
     Attributes
     ----------
     angle : (F,) float64, angle of ``U_f`` in the face frame of
-        :func:`~torch_edgevf.singularities.face_frame_angles` (edge-0 frame = angle 0)
+        :func:`~torch_edgevf.fields.singularities.face_frame_angles` (edge-0 frame = angle 0)
     matching : (E,) int64 in {0, 1, 2, 3}: ``U_g = T_{f->g}(U_f) i^k`` for
         ``f = edge_faces[e, 0]``, ``g = edge_faces[e, 1]`` (0 on the tree and boundary)
     holonomy : (V,) int64 in {0, 1, 2, 3}, sum of the matchings around each vertex
@@ -204,8 +204,8 @@ def _transport_offsets(topo: Topology, theta: np.ndarray, alpha: np.ndarray, edg
 
 def comb(verts, faces, z, cut: CutGraph | None = None) -> Combing:
     """Comb a cross field into one direction per face along the dual tree (step 3)."""
-    verts, topo = _topology_and_verts(verts, faces)
-    z = _edge_field(z, topo, verts)
+    verts, topo = topology_and_verts(verts, faces)
+    z = as_edge_field(z, topo, verts)
     cut = cut_graph(verts, topo) if cut is None else cut
     alpha, theta = _face_cross_angles(verts, topo, z)
     nf = topo.num_faces
@@ -405,8 +405,8 @@ def parametrize(
     -------
     :class:`Parametrization`
     """
-    verts, topo = _topology_and_verts(verts, faces)
-    z = _edge_field(z, topo, verts)
+    verts, topo = topology_and_verts(verts, faces)
+    z = as_edge_field(z, topo, verts)
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
     verts = verts.detach().to(torch.float64)

@@ -34,9 +34,10 @@ from __future__ import annotations
 
 import torch
 
-from .geometry import _topology_and_verts
-from .linalg import SparseSolver, expm_multiply, solve
-from .operators import _edge_field, connection_laplacian, covariant_derivative, mass_matrix
+from .._validation import as_edge_field
+from ..linalg import SparseSolver, expm_multiply, solve
+from ..mesh.geometry import topology_and_verts
+from ..operators.functional import connection_laplacian, covariant_derivative, mass_matrix
 
 __all__ = ["Transporter", "transport"]
 
@@ -63,11 +64,11 @@ class Transporter:
     """
 
     def __init__(self, verts, faces, w, smoothing: float = 0.0):
-        verts, topo = _topology_and_verts(verts, faces)
+        verts, topo = topology_and_verts(verts, faces)
         if not isinstance(smoothing, (int, float)) or smoothing < 0:
             raise ValueError(f"smoothing must be a float >= 0, got {smoothing!r}")
         self.verts, self.topo = verts, topo
-        self.w = _edge_field(w, topo, verts, name="w")
+        self.w = as_edge_field(w, topo, verts, name="w")
         if self.w.dim() != 1:
             raise ValueError(f"w must have shape (E,), got {tuple(self.w.shape)}")
         self.D = covariant_derivative(verts, topo, self.w)
@@ -95,7 +96,7 @@ class Transporter:
         """
         if not isinstance(steps, int) or steps < 1:
             raise ValueError(f"steps must be an integer >= 1, got {steps!r}")
-        z = _edge_field(z0, self.topo, self.verts, name="z0")
+        z = as_edge_field(z0, self.topo, self.verts, name="z0")
         if not torch.is_tensor(t):
             t = torch.tensor(float(t), dtype=self.verts.dtype, device=self.verts.device)
         dt = t / steps
@@ -108,7 +109,7 @@ class Transporter:
 
     def trajectory(self, z0, t, steps: int) -> list[torch.Tensor]:
         """``[z(0), z(t/steps), ..., z(t)]`` (with smoothing after each step)."""
-        z = _edge_field(z0, self.topo, self.verts, name="z0")
+        z = as_edge_field(z0, self.topo, self.verts, name="z0")
         out = [z]
         for _ in range(steps):
             z = self(z, t / steps, 1)

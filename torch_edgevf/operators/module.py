@@ -5,15 +5,16 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from . import operators as ops
-from ._validation import as_verts, check_n, check_vertex_count
-from .geometry import face_geometry
-from .topology import Topology
+from .._dtypes import complex_dtype, real_dtype
+from .._validation import as_verts, check_n, check_vertex_count
+from ..mesh.geometry import face_geometry
+from ..mesh.topology import Topology
+from . import functional as ops
+from . import kernels
+from .patterns import diagonal
 
 __all__ = ["EdgeOperators"]
 
-_COMPLEX_OF = {torch.float32: torch.complex64, torch.float64: torch.complex128}
-_REAL_OF = {torch.complex64: torch.float32, torch.complex128: torch.float64}
 
 
 class EdgeOperators(nn.Module):
@@ -75,21 +76,21 @@ class EdgeOperators(nn.Module):
         check_vertex_count(verts, topo.num_vertices)
         geom = face_geometry(verts, topo)  # validates the positions before anything is replaced
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
-        mass_values = ops._mass_values(geom, topo)
+        mass_values = kernels.mass_values(geom, topo)
         e = self.edges.to(verts.device)
         # Each operator replaces its predecessor as soon as it is built, so that the old and
         # the new set of operators are never held together (peak memory of large meshes).
         self.verts = verts
-        self.mass = ops.diagonal(mass_values)
+        self.mass = diagonal(mass_values)
         self.connection_laplacian = None
-        self.connection_laplacian = ops._connection_laplacian_from(geom, signs, topo, self.n)
+        self.connection_laplacian = kernels.connection_laplacian_from(geom, signs, topo, self.n)
         self.gradient = self.laplace_beltrami = None
-        self.gradient = ops._pattern(topo, "EV").assemble(ops._gradient_values(geom, signs))
-        self.laplace_beltrami = ops._laplace_beltrami_from(self.gradient.values(), mass_values, topo)
-        self.curl_div = ops._pattern(topo, "FE").assemble(ops._curl_values(geom, signs))
+        self.gradient = kernels.cached_pattern(topo, "EV").assemble(kernels.gradient_values(geom, signs))
+        self.laplace_beltrami = kernels.laplace_beltrami_from(self.gradient.values(), mass_values, topo)
+        self.curl_div = kernels.cached_pattern(topo, "FE").assemble(kernels.curl_values(geom, signs))
         self.vertex_mass = None
-        self.vertex_mass = ops._vertex_mass_from(geom, topo, lumped=False)
-        self.lumped_vertex_mass = ops._vertex_mass_from(geom, topo, lumped=True)
+        self.vertex_mass = kernels.vertex_mass_from(geom, topo, lumped=False)
+        self.lumped_vertex_mass = kernels.vertex_mass_from(geom, topo, lumped=True)
         self.face_area = geom.area
         self.edge_length = torch.linalg.vector_norm(verts[e[:, 1]] - verts[e[:, 0]], dim=-1)
         return self
@@ -138,14 +139,14 @@ class EdgeOperators(nn.Module):
         device, dtype, non_blocking, _ = torch._C._nn._parse_to(*args, **kwargs)
         if dtype is not None and not (dtype.is_floating_point or dtype.is_complex):
             raise ValueError(f"EdgeOperators can only be converted to a floating dtype, got {dtype}")
-        real = _REAL_OF.get(dtype, dtype) if dtype is not None else None
-        if real is not None and real not in _COMPLEX_OF:
+        real = real_dtype(dtype) if dtype is not None else None
+        if real is not None and real not in (torch.float32, torch.float64):
             raise ValueError(f"EdgeOperators supports float32 and float64, got {dtype}")
 
         def convert(t):
             target = None
             if real is not None and t.is_complex():
-                target = _COMPLEX_OF[real]
+                target = complex_dtype(real)
             elif real is not None and t.is_floating_point():
                 target = real
             return t.to(device=device, dtype=target, non_blocking=non_blocking)

@@ -72,10 +72,9 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ._validation import check_n
-from .geometry import _topology_and_verts, angle_defects, face_geometry, face_normals, pair_transport
-from .operators import _edge_field
-from .topology import Topology
+from .._validation import as_edge_field, check_n
+from ..mesh.geometry import angle_defects, face_geometry, face_normals, pair_transport, topology_and_verts
+from ..mesh.topology import Topology
 
 __all__ = [
     "Singularities",
@@ -195,10 +194,10 @@ def face_rotations(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (F, 3) real tensor in ``[-pi, pi]``.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     n = check_n(n)
     verts = verts.detach()
-    z = _edge_field(z, topo, verts).detach()
+    z = as_edge_field(z, topo, verts).detach()
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
     geom = face_geometry(verts, topo)
@@ -239,7 +238,7 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
     """
     if boundary not in _BOUNDARY:
         raise ValueError(f"boundary must be one of {_BOUNDARY}, got {boundary!r}")
-    verts, topo = _topology_and_verts(verts, faces)
+    verts, topo = topology_and_verts(verts, faces)
     n = check_n(n)
     with torch.no_grad():
         omega = face_rotations(verts, topo, z, n).to(torch.float64)
@@ -319,9 +318,9 @@ def locate_singularities(verts, faces, z, n: int = 1, which=None) -> Singularity
     which : (K,) int tensor of face indices, or None for the singular faces of
         :func:`singularities`.
     """
-    verts, topo = _topology_and_verts(verts, faces)
+    verts, topo = topology_and_verts(verts, faces)
     n = check_n(n)
-    z = _edge_field(z, topo, verts)
+    z = as_edge_field(z, topo, verts)
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
     if which is None:
@@ -364,7 +363,7 @@ def face_frame_angles(verts, topo) -> torch.Tensor:
     ``a`` reads ``z_a e^{i n theta_a}`` in the face-local one, and
     ``r_ab = e^{i (theta_a - theta_b)}``.
     """
-    verts, topo = _topology_and_verts(verts, topo)
+    verts, topo = topology_and_verts(verts, topo)
     fl = topo.faces.to(verts.device)
     p = verts[fl]
     vec = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]  # edge opposite corner k, from k+1 to k+2
@@ -413,9 +412,9 @@ def split_faces(verts, faces, z, which, barycentric, n: int = 1) -> SplitResult:
     which : (K,) distinct face indices
     barycentric : (K, 3) positive barycentric coordinates of the new vertices
     """
-    verts, topo = _topology_and_verts(verts, faces)
+    verts, topo = topology_and_verts(verts, faces)
     n = check_n(n)
-    z = _edge_field(z, topo, verts)
+    z = as_edge_field(z, topo, verts)
     dev = verts.device
     which = torch.as_tensor(which, dtype=torch.int64, device=dev).flatten()
     bary = torch.as_tensor(barycentric, dtype=verts.dtype, device=dev).reshape(-1, 3)
@@ -483,7 +482,7 @@ def split_singular_faces(verts, faces, z, n: int = 1, min_barycentric: float = 1
     -------
     :class:`SplitResult`
     """
-    verts, topo = _topology_and_verts(verts, faces)
+    verts, topo = topology_and_verts(verts, faces)
     loc = locate_singularities(verts, topo, z, n)
     bary = loc.barycentric.detach().clamp_min(min_barycentric)
     bary = bary / bary.sum(1, keepdim=True)

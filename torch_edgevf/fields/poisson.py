@@ -29,26 +29,27 @@ from __future__ import annotations
 
 import torch
 
-from .geometry import _topology_and_verts
-from .linalg import SparseSolver, solve
-from .operators import _edge_field, gradient, laplace_beltrami, mass_matrix, vertex_mass
-from .topology import Topology
+from .._validation import as_edge_field
+from ..linalg import SparseSolver, solve
+from ..mesh.geometry import topology_and_verts
+from ..mesh.topology import Topology
+from ..operators.functional import gradient, laplace_beltrami, mass_matrix, vertex_mass
 
 __all__ = ["gradient_projection_rhs", "project_on_gradients", "gradient_energy", "GradientProjector"]
 
 
 def gradient_projection_rhs(verts, topo, z) -> torch.Tensor:
     """The right-hand side ``Re(G^* z)``, (V,) or (V, C) real (thesis 4.2)."""
-    verts, topo = _topology_and_verts(verts, topo)
-    z = _edge_field(z, topo, verts)
+    verts, topo = topology_and_verts(verts, topo)
+    z = as_edge_field(z, topo, verts)
     g = gradient(verts, topo)
     return (g.conj().transpose(0, 1) @ z).real
 
 
 def gradient_energy(verts, topo, u, z) -> torch.Tensor:
     """``E_z(u) = int |grad u - U|^2 = u^T L u - 2 Re(G^* z)^T u + z^* M_z z`` (per column)."""
-    verts, topo = _topology_and_verts(verts, topo)
-    z = _edge_field(z, topo, verts)
+    verts, topo = topology_and_verts(verts, topo)
+    z = as_edge_field(z, topo, verts)
     g = gradient(verts, topo)
     m = mass_matrix(verts, topo).values()
     gu = g @ u.to(z.dtype)
@@ -116,7 +117,7 @@ class GradientProjector:
     """
 
     def __init__(self, verts, faces):
-        verts, topo = _topology_and_verts(verts, faces)
+        verts, topo = topology_and_verts(verts, faces)
         self.verts, self.topo = verts, topo
         self._g = gradient(verts, topo)
         L = laplace_beltrami(verts, topo)
@@ -128,7 +129,7 @@ class GradientProjector:
         self._comp = topo.components.to(dev)
 
     def rhs(self, z) -> torch.Tensor:
-        z = _edge_field(z, self.topo, self.verts)
+        z = as_edge_field(z, self.topo, self.verts)
         return (self._g.conj().transpose(0, 1) @ z).real
 
     def __call__(self, z) -> torch.Tensor:

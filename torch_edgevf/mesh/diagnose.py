@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ._validation import as_faces, as_verts
+from .._validation import as_faces, as_verts
 from .geometry import face_geometry
 from .topology import Topology
 

@@ -1,0 +1,151 @@
+"""Batches of meshes of different sizes, as one disconnected mesh.
+
+:func:`collate_meshes` concatenates features, offsets indices, makes the sparse operators
+block diagonal and adds batch index vectors; it is the ``collate_fn`` of a
+``DataLoader`` (worker processes included).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from .precompute import MeshFields, MeshOperators
+
+__all__ = ["MeshSample", "MeshBatch", "collate_meshes"]
+
+@dataclass
+class MeshSample:
+    """One item of a mesh dataset: operators, vertex features ``(V, C)`` and a label.
+
+    ``label`` is an int (whole-shape), or a ``(V,)`` / ``(F,)`` int tensor (segmentation).
+    """
+
+    operators: MeshOperators
+    features: torch.Tensor
+    label: int | torch.Tensor | None = None
+    index: int = -1
+
+
+def _block_diagonal(mats: Sequence[torch.Tensor], row_offsets, col_offsets) -> torch.Tensor:
+    idx, vals = [], []
+    for m, r, c in zip(mats, row_offsets, col_offsets):
+        m = m.coalesce()
+        idx.append(m.indices() + torch.tensor([[r], [c]]))
+        vals.append(m.values())
+    shape = (int(row_offsets[-1]), int(col_offsets[-1]))
+    return torch.sparse_coo_tensor(torch.cat(idx, 1), torch.cat(vals), shape, is_coalesced=True,
+                                   check_invariants=False)
+
+
+@dataclass(kw_only=True)
+class MeshBatch(MeshFields):
+    """Several meshes as one disconnected mesh: what the models take.
+
+    The tensors of :class:`~torch_edgevf.learning.precompute.MeshFields`, concatenated:
+    vertices, edges and faces of mesh ``b`` are rows ``offsets[b]:offsets[b+1]``;
+    ``edges``, ``faces`` and ``face_edges`` hold global indices; sparse operators are
+    block diagonal; eigenpairs are stacked row-wise with ``edge_evals``/``vertex_evals``
+    of shape ``(B, k)``. A single mesh is a batch of one (:meth:`from_operators`).
+
+    Attributes
+    ----------
+    features : (V, C) tensor, the vertex features of all meshes
+    labels : (B,) or (V,) / (F,) int64 tensor, or None
+    vertex_offsets, edge_offsets, face_offsets : (B + 1,) int64 tensors
+    vertex_batch, edge_batch, face_batch : (V,), (E,), (F,) int64 tensors, the mesh of each element
+    indices : (B,) int64 tensor, the dataset index of each mesh
+    """
+
+    features: torch.Tensor
+    labels: torch.Tensor | None
+    vertex_offsets: torch.Tensor
+    edge_offsets: torch.Tensor
+    face_offsets: torch.Tensor
+    vertex_batch: torch.Tensor
+    edge_batch: torch.Tensor
+    face_batch: torch.Tensor
+    indices: torch.Tensor = field(default_factory=lambda: torch.zeros(0, dtype=torch.int64))
+
+    @property
+    def num_meshes(self) -> int:
+        return int(self.vertex_offsets.shape[0] - 1)
+
+    @classmethod
+    def from_operators(cls, operators: MeshOperators, features, label=None) -> "MeshBatch":
+        return collate_meshes([MeshSample(operators, features, label)])
+
+
+def collate_meshes(samples: Sequence[MeshSample]) -> MeshBatch:
+    """Batch meshes of different sizes (the ``collate_fn`` of a ``DataLoader``).
+
+    Parameters
+    ----------
+    samples : sequence of :class:`MeshSample`, all with the same feature width, numbers
+        of eigenpairs, ``n``, dtypes and kind of label.
+
+    Returns
+    -------
+    MeshBatch
+    """
+    if not samples:
+        raise ValueError("collate_meshes needs at least one sample")
+    for s in samples:
+        if not isinstance(s, MeshSample):
+            raise ValueError(f"collate_meshes expects MeshSample items, got {type(s).__name__}")
+    ops_list = [s.operators for s in samples]
+    first = ops_list[0]
+    for o, s in zip(ops_list, samples):
+        if o.edge_evals.shape != first.edge_evals.shape or o.vertex_evals.shape != first.vertex_evals.shape:
+            raise ValueError("all meshes of a batch need the same numbers of eigenpairs")
+        if o.n != first.n or o.verts.dtype != first.verts.dtype:
+            raise ValueError("all meshes of a batch need the same n and dtype")
+        if (o.vertex_gradient is None) != (first.vertex_gradient is None):
+            raise ValueError("either all or no meshes of a batch have a vertex_gradient")
+        if s.features.dim() != 2 or s.features.shape[0] != o.num_vertices:
+            raise ValueError(f"features must have shape (V, C) with V = {o.num_vertices}, got {tuple(s.features.shape)}")
+        if s.features.shape[1] != samples[0].features.shape[1]:
+            raise ValueError("all samples of a batch need the same number of feature channels")
+    nv = torch.tensor([0] + [o.num_vertices for o in ops_list]).cumsum(0)
+    ne = torch.tensor([0] + [o.num_edges for o in ops_list]).cumsum(0)
+    nf = torch.tensor([0] + [o.num_faces for o in ops_list]).cumsum(0)
+    cat = torch.cat
+
+    def batch_vector(offsets):
+        return torch.repeat_interleave(torch.arange(len(samples)), offsets[1:] - offsets[:-1])
+
+    labels = [s.label for s in samples]
+    if all(lab is None for lab in labels):
+        label_t = None
+    elif all(isinstance(lab, (int, np.integer)) or (isinstance(lab, torch.Tensor) and lab.dim() == 0)
+             for lab in labels):
+        label_t = torch.tensor([int(lab) for lab in labels], dtype=torch.int64)
+    elif all(isinstance(lab, torch.Tensor) and lab.dim() == 1 for lab in labels):
+        label_t = cat([lab.to(torch.int64) for lab in labels])
+    else:
+        raise ValueError("labels must be all ints, all 1-D tensors, or all None")
+    return MeshBatch(
+        features=cat([s.features for s in samples]),
+        labels=label_t,
+        verts=cat([o.verts for o in ops_list]),
+        faces=cat([o.faces + nv[b] for b, o in enumerate(ops_list)]),
+        edges=cat([o.edges + nv[b] for b, o in enumerate(ops_list)]),
+        face_edges=cat([o.face_edges + ne[b] for b, o in enumerate(ops_list)]),
+        edge_mass=cat([o.edge_mass for o in ops_list]),
+        vertex_mass=cat([o.vertex_mass for o in ops_list]),
+        face_area=cat([o.face_area for o in ops_list]),
+        gradient=_block_diagonal([o.gradient for o in ops_list], ne, nv),
+        connection_laplacian=_block_diagonal([o.connection_laplacian for o in ops_list], ne, ne),
+        edge_evals=torch.stack([o.edge_evals for o in ops_list]),
+        edge_evecs=cat([o.edge_evecs for o in ops_list]),
+        vertex_evals=torch.stack([o.vertex_evals for o in ops_list]),
+        vertex_evecs=cat([o.vertex_evecs for o in ops_list]),
+        vertex_gradient=(None if first.vertex_gradient is None
+                         else _block_diagonal([o.vertex_gradient for o in ops_list], nv, nv)),
+        vertex_offsets=nv, edge_offsets=ne, face_offsets=nf,
+        vertex_batch=batch_vector(nv), edge_batch=batch_vector(ne), face_batch=batch_vector(nf),
+        indices=torch.tensor([s.index for s in samples], dtype=torch.int64),
+    )

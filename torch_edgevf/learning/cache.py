@@ -1,0 +1,175 @@
+"""An on-disk cache of :class:`~torch_edgevf.learning.precompute.MeshOperators`.
+
+Entries are keyed by the topology, the float64 positions, the options and the package
+version; they are written atomically and verified when read (a corrupt or stale entry is
+rebuilt, with a logged warning). Never pickled: ``np.savez`` and
+``np.load(allow_pickle=False)``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import tempfile
+import zipfile
+import zlib
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .._validation import as_faces, as_verts
+from .._version import __version__
+from ..mesh.topology import Topology
+from .precompute import MeshOperators, compute_operators
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["OperatorCache"]
+
+_SPARSE_FIELDS = ("gradient", "connection_laplacian", "vertex_gradient")
+
+
+def _sha256(a: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+def _to_arrays(o: MeshOperators) -> dict:
+    arrays = {}
+    for f in fields(o):
+        x = getattr(o, f.name)
+        if f.name == "n":
+            arrays["n"] = np.asarray(x, dtype=np.int64)
+        elif x is None:
+            continue
+        elif f.name in _SPARSE_FIELDS:
+            x = x.coalesce()
+            arrays[f"{f.name}.indices"] = x.indices().numpy()
+            arrays[f"{f.name}.values"] = x.values().detach().resolve_conj().numpy()
+            arrays[f"{f.name}.shape"] = np.asarray(x.shape, dtype=np.int64)
+        else:
+            arrays[f.name] = x.detach().resolve_conj().numpy()
+    return arrays
+
+
+def _from_arrays(arrays: dict) -> MeshOperators:
+    kwargs = {}
+    for f in fields(MeshOperators):
+        if f.name == "n":
+            kwargs["n"] = int(arrays["n"])
+        elif f.name in _SPARSE_FIELDS:
+            if f"{f.name}.indices" not in arrays:
+                if f.name == "vertex_gradient":
+                    kwargs[f.name] = None
+                    continue
+                raise KeyError(f"{f.name}.indices")
+            idx = torch.from_numpy(arrays[f"{f.name}.indices"].astype(np.int64))
+            shape = tuple(int(s) for s in arrays[f"{f.name}.shape"])
+            if idx.dim() != 2 or idx.shape[0] != 2 or (idx.numel() and (idx.min() < 0 or idx[0].max() >= shape[0]
+                                                                        or idx[1].max() >= shape[1])):
+                raise ValueError(f"{f.name}: indices out of range")
+            kwargs[f.name] = torch.sparse_coo_tensor(idx, torch.from_numpy(arrays[f"{f.name}.values"]), shape,
+                                                     check_invariants=False).coalesce()
+        else:
+            kwargs[f.name] = torch.from_numpy(arrays[f.name])
+    return MeshOperators(**kwargs)
+
+
+def _content_hash(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+class OperatorCache:
+    """On-disk cache of :class:`MeshOperators`.
+
+    An entry is keyed by the SHA-256 of the faces (int64 bytes), of the positions
+    (float64 bytes), by the options of :func:`compute_operators` and by the package
+    version. The file name derives from the first three; the full key (with the
+    version) and a SHA-256 of the content are stored inside, and checked when the entry
+    is read, together with the shapes. A file that cannot be read, whose content hash
+    or key does not match (another version, a collision), or whose shapes are
+    inconsistent is logged as a warning and rebuilt. Files are written to a temporary
+    file in the same folder and moved into place with ``os.replace``, so readers never
+    see half-written entries. Pickle is never used.
+
+    Parameters
+    ----------
+    root : path, created if needed.
+    """
+
+    def __init__(self, root):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    @staticmethod
+    def key(verts, faces, **options) -> dict:
+        """The cache key of a mesh and options (JSON-serialisable dict)."""
+        v = as_verts(verts).detach().to(torch.float64).cpu().numpy()
+        f = (faces.faces if isinstance(faces, Topology) else as_faces(faces)).cpu().numpy().astype(np.int64)
+        return {"faces": _sha256(f), "verts": _sha256(v), "options": {k: options[k] for k in sorted(options)},
+                "version": __version__}
+
+    def path(self, key: dict) -> Path:
+        """File of an entry: from the mesh hashes and options (not the version)."""
+        stem = {k: key[k] for k in ("faces", "verts", "options")}
+        return self.root / (hashlib.sha256(json.dumps(stem, sort_keys=True).encode()).hexdigest()[:40] + ".npz")
+
+    def load(self, key: dict) -> MeshOperators | None:
+        """The verified entry for ``key``, or None (missing, or invalid: logged)."""
+        path = self.path(key)
+        if not path.exists():
+            return None
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {name: data[name] for name in data.files}
+            stored_key = json.loads(str(arrays.pop("__key__")))
+            stored_hash = str(arrays.pop("__hash__"))
+            if stored_hash != _content_hash(arrays):
+                raise ValueError("content hash mismatch (corrupt file)")
+            if stored_key != key:
+                diff = [k for k in key if stored_key.get(k) != key[k]]
+                raise ValueError(f"key mismatch in {diff} (stored version {stored_key.get('version')!r})")
+            out = _from_arrays(arrays)
+            out.check()
+            return out
+        except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
+            logger.warning("operator cache entry %s is invalid (%s: %s); rebuilding it", path.name,
+                           type(exc).__name__, exc)
+            return None
+
+    def save(self, key: dict, operators: MeshOperators) -> Path:
+        """Write an entry atomically; returns its path."""
+        arrays = _to_arrays(operators)
+        arrays["__hash__"] = np.asarray(_content_hash(arrays))
+        arrays["__key__"] = np.asarray(json.dumps(key, sort_keys=True))
+        path = self.path(key)
+        fd, tmp = tempfile.mkstemp(dir=self.root, prefix=path.stem, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    def get(self, verts, faces, **options) -> MeshOperators:
+        """Load the entry of a mesh, or compute (:func:`compute_operators`) and store it."""
+        key = self.key(verts, faces, **options)
+        out = self.load(key)
+        if out is None:
+            out = compute_operators(verts, faces, **options)
+            self.save(key, out)
+        return out

@@ -1,0 +1,265 @@
+"""The per-mesh operators that the learning layers take, computed once per mesh.
+
+:class:`MeshOperators` holds what the networks of :mod:`torch_edgevf.learning.models`
+need for one mesh (``M_z``, ``G``, ``L_c``, eigenpairs, ...); :func:`compute_operators`
+computes them in float64, the eigenpairs with :func:`torch_edgevf.linalg.eigsh`.
+:class:`MeshFields` declares the per-mesh tensors once, for :class:`MeshOperators` and for
+the batches of :mod:`torch_edgevf.learning.batching`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import scipy.sparse as sp
+import torch
+
+from .._dtypes import complex_dtype
+from .._validation import as_verts
+from ..linalg import eigsh
+from ..mesh.geometry import face_areas, face_normals
+from ..mesh.topology import Topology
+from ..operators import functional as ops
+
+__all__ = [
+    "MeshFields",
+    "MeshOperators",
+    "compute_operators",
+    "heat_kernel_signature",
+    "vertex_gradient_operator",
+]
+
+
+@dataclass
+class MeshFields:
+    """The tensors of one mesh, or of a batch of meshes as one disconnected mesh.
+
+    Attributes
+    ----------
+    verts : (V, 3) float tensor
+    faces : (F, 3) int64 tensor
+    edges : (E, 2) int64 tensor, ``i < j``
+    face_edges : (F, 3) int64 tensor, the edge opposite each corner
+    edge_mass : (E,) real, the diagonal of ``M_z``
+    vertex_mass : (V,) real, lumped vertex masses
+    face_area : (F,) real
+    gradient : (E, V) complex sparse ``G``
+    connection_laplacian : (E, E) sparse ``L_c^(n)``
+    edge_evals, edge_evecs : (k_e,), (E, k_e)
+        Smallest eigenpairs of ``(L_c^(n), M_z)``, ``Phi^H M_z Phi = I``.
+    vertex_evals, vertex_evecs : (k_v,), (V, k_v)
+        Smallest eigenpairs of a vertex Laplacian with the lumped mass (see
+        :func:`compute_operators`), ``Phi^T M_v Phi = I``.
+    vertex_gradient : (V, V) complex sparse or None
+        Least-squares tangent-plane vertex gradient (the DiffusionNet-style baseline).
+    """
+
+    verts: torch.Tensor
+    faces: torch.Tensor
+    edges: torch.Tensor
+    face_edges: torch.Tensor
+    edge_mass: torch.Tensor
+    vertex_mass: torch.Tensor
+    face_area: torch.Tensor
+    gradient: torch.Tensor
+    connection_laplacian: torch.Tensor
+    edge_evals: torch.Tensor
+    edge_evecs: torch.Tensor
+    vertex_evals: torch.Tensor
+    vertex_evecs: torch.Tensor
+    vertex_gradient: torch.Tensor | None = None
+
+    @property
+    def num_vertices(self) -> int:
+        return int(self.verts.shape[0])
+
+    @property
+    def num_edges(self) -> int:
+        return int(self.edges.shape[0])
+
+    @property
+    def num_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+
+@dataclass
+class MeshOperators(MeshFields):
+    """The operators of one mesh used by the learning layers.
+
+    The tensors of :class:`MeshFields` and ``n : int``, the symmetry order of ``L_c``.
+    """
+
+    n: int = 1
+
+    def to(self, dtype: torch.dtype) -> MeshOperators:
+        """A copy with real tensors in ``dtype`` and complex ones in the matching complex dtype."""
+        return MeshOperators(**{f.name: _convert(getattr(self, f.name), dtype) for f in fields(self)})
+
+    def check(self) -> None:
+        """Raise ``ValueError`` if the shapes are inconsistent."""
+        V, E, F = self.num_vertices, self.num_edges, self.num_faces
+        expect = {
+            "verts": (V, 3),
+            "faces": (F, 3),
+            "edges": (E, 2),
+            "face_edges": (F, 3),
+            "edge_mass": (E,),
+            "vertex_mass": (V,),
+            "face_area": (F,),
+            "gradient": (E, V),
+            "connection_laplacian": (E, E),
+            "edge_evals": (self.edge_evals.shape[0],),
+            "edge_evecs": (E, self.edge_evals.shape[0]),
+            "vertex_evals": (self.vertex_evals.shape[0],),
+            "vertex_evecs": (V, self.vertex_evals.shape[0]),
+        }
+        if self.vertex_gradient is not None:
+            expect["vertex_gradient"] = (V, V)
+        for name, shape in expect.items():
+            got = tuple(getattr(self, name).shape)
+            if got != shape:
+                raise ValueError(f"MeshOperators.{name} has shape {got}, expected {shape}")
+        if int(self.faces.max()) >= V or int(self.edges.max()) >= V or int(self.face_edges.max()) >= E:
+            raise ValueError("MeshOperators has out-of-range indices")
+
+
+def _convert(x, dtype: torch.dtype):
+    if not isinstance(x, torch.Tensor):
+        return x
+    if x.is_complex():
+        return x.to(complex_dtype(dtype))
+    if x.is_floating_point():
+        return x.to(dtype)
+    return x
+
+
+def vertex_gradient_operator(verts, faces) -> torch.Tensor:
+    r"""Least-squares tangent-plane gradient at vertices, complex (the DiffusionNet scheme).
+
+    Each vertex gets a tangent frame ``(x_i, y_i)`` (``x_i`` the projection of its first
+    neighbouring edge on the plane normal to the area-weighted vertex normal); the
+    gradient :math:`g_i = g_x + \imath g_y` minimises
+    :math:`\sum_{j \sim i} (g \cdot a_{ij} - (f_j - f_i))^2` over the neighbours, with
+    :math:`a_{ij}` the tangent coordinates of :math:`v_j - v_i`. The frame is arbitrary per
+    vertex, so only gauge-invariant features (``|g|``, ``Re(g conj(A g))``) are meaningful.
+
+    Returns
+    -------
+    (V, V) complex sparse tensor ``D`` with ``g = D f``.
+    """
+    verts = as_verts(verts).detach()
+    topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
+    v = verts.to(torch.float64).numpy()
+    f = topo.faces.numpy()
+    e = topo.edges.numpy()
+    fn = face_normals(verts.to(torch.float64), topo).numpy() * face_areas(verts.to(torch.float64), topo).numpy()[:, None]
+    normal = np.zeros_like(v)
+    np.add.at(normal, f.ravel(), np.repeat(fn, 3, axis=0))
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    order = np.lexsort((dst, src))
+    src, dst = src[order], dst[order]
+    d = v[dst] - v[src]
+    first = np.zeros(v.shape[0], dtype=np.int64)
+    first[src[::-1]] = np.arange(src.shape[0])[::-1]  # first outgoing edge of each vertex
+    x = d[first] - (d[first] * normal).sum(1, keepdims=True) * normal
+    x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-300)
+    y = np.cross(normal, x)
+    a = np.stack([(d * x[src]).sum(1), (d * y[src]).sum(1)], axis=1)  # (2E, 2)
+    N = np.zeros((v.shape[0], 2, 2))
+    np.add.at(N, src, a[:, :, None] * a[:, None, :])
+    scale = np.trace(N, axis1=1, axis2=2)[:, None, None]
+    N += 1e-8 * scale * np.eye(2)
+    c = np.einsum("eij,ej->ei", np.linalg.inv(N)[src], a)
+    cz = c[:, 0] + 1j * c[:, 1]
+    rows = np.concatenate([src, src])
+    cols = np.concatenate([dst, src])
+    vals = np.concatenate([cz, -cz])
+    D = sp.coo_matrix((vals, (rows, cols)), shape=(v.shape[0],) * 2).tocsr().tocoo()
+    cdtype = complex_dtype(verts.dtype)
+    idx = torch.from_numpy(np.stack([D.row, D.col]).astype(np.int64))
+    return torch.sparse_coo_tensor(idx, torch.from_numpy(D.data).to(cdtype), D.shape,
+                                   check_invariants=False).coalesce()
+
+
+def compute_operators(verts, faces, n: int = 1, k_edge: int = 32, k_vertex: int = 32,
+                      vertex_laplacian: str = "cotan", vertex_gradient: bool = False,
+                      tol: float | None = None) -> MeshOperators:
+    """Compute the :class:`MeshOperators` of a mesh, in float64.
+
+    Parameters
+    ----------
+    verts : (V, 3) float tensor or array
+    faces : (F, 3) int tensor or array, or a Topology
+    n : int >= 1, symmetry order of ``L_c``
+    k_edge, k_vertex : int, numbers of eigenpairs of ``(L_c, M_z)`` and of the vertex
+        Laplacian (with the lumped vertex mass)
+    vertex_laplacian : {"cotan", "edge"}
+        ``"cotan"``: cotangent Laplacian (DiffusionNet, and the input features);
+        ``"edge"``: ``L = G^* M_z^{-1} G`` of thesis 4.2.
+    vertex_gradient : bool
+        Also compute :func:`vertex_gradient_operator` (for the baseline).
+    tol : float, optional
+        Tolerance of the eigenpairs, ``tol`` of :func:`torch_edgevf.linalg.eigsh`
+        (default: its default, ``1e-13`` in float64).
+    """
+    if vertex_laplacian not in ("cotan", "edge"):
+        raise ValueError(f"vertex_laplacian must be 'cotan' or 'edge', got {vertex_laplacian!r}")
+    if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+        raise ValueError(f"n must be an integer >= 1, got {n!r}")
+    verts = as_verts(verts).detach().to(torch.float64)
+    topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
+    ne, nv = topo.num_edges, topo.num_vertices
+    for name, k, size in (("k_edge", k_edge, ne), ("k_vertex", k_vertex, nv)):
+        if not isinstance(k, int) or not 1 <= k < size:
+            raise ValueError(f"{name} must be an integer in [1, {size - 1}], got {k!r}")
+    edge_mass = ops.mass_matrix(verts, topo).values()
+    Lc = ops.connection_laplacian(verts, topo, n)
+    vmass = ops.vertex_mass(verts, topo, lumped=True).values()
+    Lv = ops.cotan_laplacian(verts, topo) if vertex_laplacian == "cotan" else ops.laplace_beltrami(verts, topo)
+    with torch.no_grad():
+        edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
+        vertex = eigsh(Lv, vmass, k_vertex, tol=tol)
+    # eigsh makes the largest-modulus entry of every eigenvector real positive: a
+    # deterministic sign (the models only use sign-invariant quantities)
+    ew, ev = edge.values.clamp_min(0.0), edge.vectors
+    vw, vv = vertex.values.clamp_min(0.0), vertex.vectors
+    out = MeshOperators(
+        verts=verts, faces=topo.faces.clone(), edges=topo.edges.clone(), face_edges=topo.face_edges.clone(),
+        edge_mass=edge_mass, vertex_mass=vmass, face_area=face_areas(verts, topo),
+        gradient=ops.gradient(verts, topo).coalesce(), connection_laplacian=Lc.coalesce(),
+        edge_evals=ew, edge_evecs=ev.contiguous(), vertex_evals=vw, vertex_evecs=vv.contiguous(),
+        vertex_gradient=vertex_gradient_operator(verts, topo) if vertex_gradient else None, n=n,
+    )
+    return out
+
+
+def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) -> torch.Tensor:
+    r"""Heat kernel signature per vertex, scale normalised (intrinsic input features).
+
+    .. math::  h(x, t) = A \sum_i e^{-\lambda_i A t} \phi_i(x)^2
+
+    with ``A`` the total area (so the features of a mesh and of a scaled copy agree),
+    :math:`\phi_i` ``M_v``-orthonormal. Invariant to rigid motions, to the numbering
+    and to the sign of each eigenvector.
+
+    Parameters
+    ----------
+    evals : (k,) real tensor
+    evecs : (V, k) real tensor
+    times : (T,) tensor, default ``logspace(-2, 0, count)``
+    area : float or tensor, total surface area (default 1)
+
+    Returns
+    -------
+    (V, T) tensor.
+    """
+    if evecs.dim() != 2 or evals.shape != (evecs.shape[1],):
+        raise ValueError(f"evals (k,) and evecs (V, k) do not match: {tuple(evals.shape)}, {tuple(evecs.shape)}")
+    if times is None:
+        times = torch.logspace(-2, 0, count, dtype=evals.dtype)
+    area = torch.as_tensor(1.0 if area is None else area, dtype=evals.dtype)
+    weights = torch.exp(-evals[None, :] * area * times.to(evals.dtype)[:, None])  # (T, k)
+    return area * (evecs ** 2) @ weights.transpose(0, 1)
