@@ -48,8 +48,7 @@ def worker(mesh: str) -> None:
     import torch
 
     from torch_edgevf.fields.design import FieldDesigner
-    from torch_edgevf.linalg import factorize
-    from torch_edgevf.linalg import to_scipy
+    from torch_edgevf.linalg import factorize, to_scipy
     from torch_edgevf.linalg.eigen import default_shift
     from torch_edgevf.linalg.factor import cholmod_module
 
@@ -62,8 +61,14 @@ def worker(mesh: str) -> None:
         from torch_edgevf import icosphere
 
         verts, faces = icosphere(int(mesh.removeprefix("icosphere")))
-    _emit(mesh=mesh, what="mesh", vertices=int(verts.shape[0]), faces=int(faces.shape[0]),
-          threads=torch.get_num_threads(), cholmod=cholmod_module() is not None)
+    _emit(
+        mesh=mesh,
+        what="mesh",
+        vertices=int(verts.shape[0]),
+        faces=int(faces.shape[0]),
+        threads=torch.get_num_threads(),
+        cholmod=cholmod_module() is not None,
+    )
 
     t0 = time.perf_counter()
     designer = FieldDesigner(verts, faces, n=4)
@@ -72,8 +77,13 @@ def worker(mesh: str) -> None:
     t0 = time.perf_counter()
     z, lam = designer.smoothest(return_eigenvalue=True)
     smoothest = time.perf_counter() - t0
-    _emit(mesh=mesh, what="smoothest", seconds=smoothest, eigenvalue=float(lam),
-          rayleigh=float(designer.rayleigh_quotient(z)))
+    _emit(
+        mesh=mesh,
+        what="smoothest",
+        seconds=smoothest,
+        eigenvalue=float(lam),
+        rayleigh=float(designer.rayleigh_quotient(z)),
+    )
 
     a = to_scipy(designer.laplacian)
     m = scipy.sparse.diags(designer.mass.detach().numpy()).tocsc()
@@ -105,8 +115,10 @@ def run(mesh: str, timeout: float) -> list[dict]:
 
 def report(records: list[dict]) -> str:
     """A markdown table, one row per mesh."""
-    rows = ["| mesh | V | F | E | build | smoothest 4-field | one Cholesky (backend) | ratio | eigenvalue |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    rows = [
+        "| mesh | V | F | E | build | smoothest 4-field | one Cholesky (backend) | ratio | eigenvalue |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     by_mesh: dict = {}
     for r in records:
         by_mesh.setdefault(r["mesh"], {})[r["what"]] = r
@@ -118,8 +130,13 @@ def report(records: list[dict]) -> str:
 
         info, fac = rec.get("mesh", {}), rec.get("factor", {})
         cells = [
-            mesh, info.get("vertices", "-"), info.get("faces", "-"), rec.get("build", {}).get("edges", "-"),
-            sec("build"), sec("smoothest"), f"{sec('factor')} ({fac.get('backend', '-')})",
+            mesh,
+            info.get("vertices", "-"),
+            info.get("faces", "-"),
+            rec.get("build", {}).get("edges", "-"),
+            sec("build"),
+            sec("smoothest"),
+            f"{sec('factor')} ({fac.get('backend', '-')})",
             f"{fac['ratio']:.2f}" if "ratio" in fac else "-",
             f"{rec['smoothest']['eigenvalue']:.6g}" if "smoothest" in rec else "-",
         ]

@@ -45,12 +45,12 @@ import scipy.sparse.linalg as sla
 import torch
 from threadpoolctl import threadpool_limits
 
-from common import machine_info, markdown_table
 from torch_edgevf import EdgeOperators, icosphere
-from torch_edgevf.linalg import SparseSolver, eigsh, solve, sparse_matrix
+from torch_edgevf.linalg import SparseSolver, eigsh, solve, sparse_matrix, to_scipy
 from torch_edgevf.linalg import factor as factor_module
-from torch_edgevf.linalg import to_scipy
 from torch_edgevf.linalg.eigen import default_shift
+
+from common import machine_info, markdown_table
 
 SPOT = Path(__file__).resolve().parents[1].parent / "shared" / "meshes" / "spot.obj"
 TOL = 1e-13
@@ -120,16 +120,23 @@ def bench(name, verts, faces, k, repeats, rows):
         if backend == "superlu":
             factor_module.cvxopt_cholmod_module = lambda: None
         try:
-            fac = interleaved({"factor": lambda: SparseSolver(K_t),
-                               "eig1": lambda: eigsh(L, Mz, 1, method="lanczos")}, max(reps, repeats + 1))
+            fac = interleaved(
+                {"factor": lambda: SparseSolver(K_t), "eig1": lambda: eigsh(L, Mz, 1, method="lanczos")},
+                max(reps, repeats + 1),
+            )
             t_factor, solver = fac["factor"]
             t_eig1, (lam1, _) = fac["eig1"]
             t_solve = interleaved({"s": lambda: solver.factor.solve(b_np)}, 3 * repeats)["s"][0]
             # both SciPy references in the same interleaved rounds as ours: the machine's speed
             # drifts over minutes, so a reference timed apart would not give a stable ratio
-            eig = interleaved({"ours": lambda: eigsh(L, Mz, k, method="lanczos"),
-                               "scipy": lambda: scipy_eigsh(A, M, k, sigma, TOL),
-                               "scipy0": lambda: scipy_eigsh(A, M, k, sigma, 0)}, reps)
+            eig = interleaved(
+                {
+                    "ours": lambda: eigsh(L, Mz, k, method="lanczos"),
+                    "scipy": lambda: scipy_eigsh(A, M, k, sigma, TOL),
+                    "scipy0": lambda: scipy_eigsh(A, M, k, sigma, 0),
+                },
+                reps,
+            )
             t_eig, (lam, X) = eig["ours"]
             t_scipy, (w_ref, X_ref) = eig["scipy"]
             t_scipy0, (w0, X0) = eig["scipy0"]
@@ -138,47 +145,119 @@ def bench(name, verts, faces, k, repeats, rows):
             # solve backward: linalg's node alone, and end to end from the leaf values
             vals = K_t.values().clone().requires_grad_()
             rhs = b.clone().requires_grad_()
-            solver_g = SparseSolver(torch.sparse_coo_tensor(K_t.indices(), vals, K_t.shape, is_coalesced=True,
-                                                        check_invariants=False))
+            solver_g = SparseSolver(
+                torch.sparse_coo_tensor(
+                    K_t.indices(), vals, K_t.shape, is_coalesced=True, check_invariants=False
+                )
+            )
             x = solve(solver_g, rhs)
             g = torch.randn(x.shape, dtype=x.dtype, generator=torch.Generator().manual_seed(1))
             vals2 = K_t.values().clone().requires_grad_()
             x2 = solve(SparseSolver(sparse_matrix(K_t.indices(), vals2, K_t.shape)), rhs)
-            sb = interleaved({
-                "solve": lambda: solver_g.factor.solve(b_np),
-                "node": lambda: torch.autograd.grad(x, (solver_g.data.values, rhs), g, retain_graph=True),
-                "e2e": lambda: torch.autograd.grad(x, (vals, rhs), g, retain_graph=True),
-                "e2e2": lambda: torch.autograd.grad(x2, (vals2, rhs), g, retain_graph=True),
-            }, 5 * repeats)
+            sb = interleaved(
+                {
+                    "solve": lambda: solver_g.factor.solve(b_np),
+                    "node": lambda: torch.autograd.grad(x, (solver_g.data.values, rhs), g, retain_graph=True),
+                    "e2e": lambda: torch.autograd.grad(x, (vals, rhs), g, retain_graph=True),
+                    "e2e2": lambda: torch.autograd.grad(x2, (vals2, rhs), g, retain_graph=True),
+                },
+                5 * repeats,
+            )
             # eigenvalue backward
             lv = L.values().clone().requires_grad_()
             mv = Mz.values().clone().requires_grad_()
-            t_efwd, pairs = interleaved({"f": lambda: eigsh(
-                torch.sparse_coo_tensor(L.indices(), lv, L.shape, is_coalesced=True),
-                torch.sparse_coo_tensor(Mz.indices(), mv, Mz.shape, is_coalesced=True),
-                k, method="lanczos")}, 1)["f"]
-            t_ebwd = interleaved({"b": lambda: torch.autograd.grad(pairs.values.sum(), (lv, mv), retain_graph=True)},
-                                 3)["b"][0]
+            t_efwd, pairs = interleaved(
+                {
+                    "f": lambda: eigsh(
+                        torch.sparse_coo_tensor(L.indices(), lv, L.shape, is_coalesced=True),
+                        torch.sparse_coo_tensor(Mz.indices(), mv, Mz.shape, is_coalesced=True),
+                        k,
+                        method="lanczos",
+                    )
+                },
+                1,
+            )["f"]
+            t_ebwd = interleaved(
+                {"b": lambda: torch.autograd.grad(pairs.values.sum(), (lv, mv), retain_graph=True)}, 3
+            )["b"][0]
         finally:
             factor_module.cholmod_module, factor_module.cvxopt_cholmod_module = saved
         eig_err = float(np.abs(np.sort(w_ref) - lam.numpy()).max() / abs(w_ref).max())
         err1 = abs(float(lam1[0]) - float(lam[0])) / abs(float(lam[0]))
         assert err1 <= 1e-10, err1
         rows += [
-            (label, backend, "factor + solve M_z + L_c", t_factor + t_solve, "scipy spsolve", t_spsolve, None),
-            (label, backend, f"{k} eigenpairs (res {res:.1e}, max rel. diff to scipy {eig_err:.1e})", t_eig,
-             f"scipy eigsh sigma, tol={TOL:g} (res {res_ref:.1e})", t_scipy, TARGETS["eig"]),
-            (label, backend, f"{k} eigenpairs, as above", t_eig, f"scipy eigsh sigma, default tol=0 (res {res0:.1e})",
-             t_scipy0, TARGETS["eig"]),
-            (label, backend, f"smallest eigenpair (rel. diff to the k={k} run {err1:.0e})", t_eig1,
-             "one factorization", t_factor, TARGETS["eig1"]),
-            (label, backend, "solve backward, linalg node (adjoint solve + pattern gradient)", sb["node"][0],
-             "one solve", sb["solve"][0], TARGETS["sbwd"]),
-            (label, backend, "solve backward, end to end, matrix from torch.sparse_coo_tensor", sb["e2e"][0],
-             "one solve", sb["solve"][0], None),
-            (label, backend, "solve backward, end to end, matrix from linalg.sparse_matrix", sb["e2e2"][0],
-             "one solve", sb["solve"][0], TARGETS["sbwd"]),
-            (label, backend, f"eigenvalue backward (k={k})", t_ebwd, "eigsh forward", t_efwd, TARGETS["ebwd"]),
+            (
+                label,
+                backend,
+                "factor + solve M_z + L_c",
+                t_factor + t_solve,
+                "scipy spsolve",
+                t_spsolve,
+                None,
+            ),
+            (
+                label,
+                backend,
+                f"{k} eigenpairs (res {res:.1e}, max rel. diff to scipy {eig_err:.1e})",
+                t_eig,
+                f"scipy eigsh sigma, tol={TOL:g} (res {res_ref:.1e})",
+                t_scipy,
+                TARGETS["eig"],
+            ),
+            (
+                label,
+                backend,
+                f"{k} eigenpairs, as above",
+                t_eig,
+                f"scipy eigsh sigma, default tol=0 (res {res0:.1e})",
+                t_scipy0,
+                TARGETS["eig"],
+            ),
+            (
+                label,
+                backend,
+                f"smallest eigenpair (rel. diff to the k={k} run {err1:.0e})",
+                t_eig1,
+                "one factorization",
+                t_factor,
+                TARGETS["eig1"],
+            ),
+            (
+                label,
+                backend,
+                "solve backward, linalg node (adjoint solve + pattern gradient)",
+                sb["node"][0],
+                "one solve",
+                sb["solve"][0],
+                TARGETS["sbwd"],
+            ),
+            (
+                label,
+                backend,
+                "solve backward, end to end, matrix from torch.sparse_coo_tensor",
+                sb["e2e"][0],
+                "one solve",
+                sb["solve"][0],
+                None,
+            ),
+            (
+                label,
+                backend,
+                "solve backward, end to end, matrix from linalg.sparse_matrix",
+                sb["e2e2"][0],
+                "one solve",
+                sb["solve"][0],
+                TARGETS["sbwd"],
+            ),
+            (
+                label,
+                backend,
+                f"eigenvalue backward (k={k})",
+                t_ebwd,
+                "eigsh forward",
+                t_efwd,
+                TARGETS["ebwd"],
+            ),
         ]
 
 
@@ -205,21 +284,38 @@ def main():
             continue
         ratio = t / t_ref
         status = "" if target is None else ("met" if ratio <= target else "**missed**")
-        table.append((mesh, backend, what, f"{t:.3f}", ref, f"{t_ref:.3f}", f"{ratio:.2f}",
-                      "" if target is None else f"<= {target}", status))
+        table.append(
+            (
+                mesh,
+                backend,
+                what,
+                f"{t:.3f}",
+                ref,
+                f"{t_ref:.3f}",
+                f"{ratio:.2f}",
+                "" if target is None else f"<= {target}",
+                status,
+            )
+        )
     lines = [
         "## torch_edgevf.linalg benchmark (issue 3)",
         "",
-        f"Machine: {info['cores']} cores ({info['cpu']}); load average {[round(x, 2) for x in load0]} at start, "
+        f"Machine: {info['cores']} cores ({info['cpu']}); "
+        f"load average {[round(x, 2) for x in load0]} at start, "
         f"{[round(x, 2) for x in load1]} at the end ({time.perf_counter() - t0:.0f} s). "
-        f"torch {info['torch']} ({torch.get_num_threads()} threads), numpy {info['numpy']}, scipy {info['scipy']}; "
+        f"torch {info['torch']} ({torch.get_num_threads()} threads), numpy {info['numpy']}, "
+        f"scipy {info['scipy']}; "
         f"OMP_WAIT_POLICY={os.environ.get('OMP_WAIT_POLICY')}, "
         f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}. "
-        f"Best of {args.repeats} interleaved runs (at least 5 for eigensolves on meshes up to {SHORT_EDGES:,} edges, "
+        f"Best of {args.repeats} interleaved runs "
+        f"(at least 5 for eigensolves on meshes up to {SHORT_EDGES:,} edges, "
         f"more for the short solves); ratios are ours / reference.",
         "",
-        markdown_table(["mesh", "back-end", "ours", "time (s)", "reference", "time (s)", "ours/ref", "target",
-                        ""], table, align="lllrlrrll"),
+        markdown_table(
+            ["mesh", "back-end", "ours", "time (s)", "reference", "time (s)", "ours/ref", "target", ""],
+            table,
+            align="lllrlrrll",
+        ),
     ]
     text = "\n".join(lines)
     print(text)

@@ -118,8 +118,14 @@ def worker_edgevf(name: str) -> dict:
     moved = itertools.cycle([torch.from_numpy(perturbed(v_np, seed=SEED + 1 + k)) for k in range(3)])
     nf = int(f.shape[0])
     reps, mv_reps = repeats_for(nf)
-    out = {"mesh": name, "faces": nf, "vertices": int(v.shape[0]), "rss_after_load": current_rss_bytes(),
-           "rss_after_import": base_rss, "threads": torch.get_num_threads()}
+    out = {
+        "mesh": name,
+        "faces": nf,
+        "vertices": int(v.shape[0]),
+        "rss_after_load": current_rss_bytes(),
+        "rss_after_import": base_rss,
+        "threads": torch.get_num_threads(),
+    }
     peaks = {}
 
     def first_lc_mz():
@@ -151,12 +157,16 @@ def worker_edgevf(name: str) -> dict:
         return ev.connection_laplacian(w, topo, 1), ev.mass_matrix(w, topo)
 
     t_update_lc = time_it("re-assembly L_c+M_z", update_lc_mz, repeats=reps)
-    t_update_lc_only = time_it("re-assembly L_c", lambda: ev.connection_laplacian(next(moved), topo, 1), repeats=reps)
+    t_update_lc_only = time_it(
+        "re-assembly L_c", lambda: ev.connection_laplacian(next(moved), topo, 1), repeats=reps
+    )
 
     lc = ev.connection_laplacian(v, topo, 1)
     gen = torch.Generator().manual_seed(SEED)
-    x = torch.complex(torch.randn(topo.num_edges, generator=gen, dtype=torch.float64),
-                      torch.randn(topo.num_edges, generator=gen, dtype=torch.float64))
+    x = torch.complex(
+        torch.randn(topo.num_edges, generator=gen, dtype=torch.float64),
+        torch.randn(topo.num_edges, generator=gen, dtype=torch.float64),
+    )
     t_mv = time_it("matvec torch COO", lambda: lc @ x, repeats=mv_reps, warmup=3)
     lc_csr = lc.to_sparse_csr()
     t_mv_csr = time_it("matvec torch CSR", lambda: lc_csr @ x, repeats=mv_reps, warmup=3)
@@ -170,8 +180,20 @@ def worker_edgevf(name: str) -> dict:
     xn = x.numpy()
     t_mv_scipy = time_it("matvec scipy CSR", lambda: a @ xn, repeats=mv_reps, warmup=3)
     check = float(np.abs((lc @ x).numpy() - a @ xn).max())
-    out["timings"] = {t.name: t for t in (t_first_lc, t_topo, t_first_all, t_update, t_update_lc,
-                                           t_update_lc_only, t_mv, t_mv_csr, t_mv_scipy)}
+    out["timings"] = {
+        t.name: t
+        for t in (
+            t_first_lc,
+            t_topo,
+            t_first_all,
+            t_update,
+            t_update_lc,
+            t_update_lc_only,
+            t_mv,
+            t_mv_csr,
+            t_mv_scipy,
+        )
+    }
     out["matvec_agreement"] = check
     out["nnz_lc"] = int(lc._nnz())
     return out
@@ -254,6 +276,7 @@ def report(cases: list[str], results: dict, info: dict) -> str:
             if timing is None:
                 return "-"
             return f"{fmt_time(timing['median'])} ({fmt_time(timing['min'])})"
+
         return cell
 
     def ratio(num, den, target=None, num_src="o", den_src="p"):
@@ -266,6 +289,7 @@ def report(cases: list[str], results: dict, info: dict) -> str:
             if target is None:
                 return f"{r:.2f}"
             return f"**{r:.2f}** {'ok' if r <= target else 'MISS'}"
+
         return cell
 
     def peak(o, p):
@@ -289,12 +313,15 @@ def report(cases: list[str], results: dict, info: dict) -> str:
         row("matvec `L_c @ x` complex128, torch COO", t("matvec torch COO")),
         row("matvec, torch CSR (reference)", t("matvec torch CSR")),
         row("matvec, scipy CSR (reference)", t("matvec scipy CSR")),
-        row(f"**first L_c+M_z / libigl CR (+edge map)** (target <= {TARGET_FIRST_VS_IGL:g})",
-            ratio("first L_c+M_z (+topology)", "igl CR L+M (+edge map)", TARGET_FIRST_VS_IGL)),
-        row("first L_c+M_z / libigl CR (edge map given)",
-            ratio("first L_c+M_z (+topology)", "igl CR L+M")),
-        row(f"**re-assembly L_c+M_z / matvec** (target <= {TARGET_UPDATE_VS_MATVEC:g})",
-            ratio("re-assembly L_c+M_z", "matvec torch COO", TARGET_UPDATE_VS_MATVEC, den_src="o")),
+        row(
+            f"**first L_c+M_z / libigl CR (+edge map)** (target <= {TARGET_FIRST_VS_IGL:g})",
+            ratio("first L_c+M_z (+topology)", "igl CR L+M (+edge map)", TARGET_FIRST_VS_IGL),
+        ),
+        row("first L_c+M_z / libigl CR (edge map given)", ratio("first L_c+M_z (+topology)", "igl CR L+M")),
+        row(
+            f"**re-assembly L_c+M_z / matvec** (target <= {TARGET_UPDATE_VS_MATVEC:g})",
+            ratio("re-assembly L_c+M_z", "matvec torch COO", TARGET_UPDATE_VS_MATVEC, den_src="o"),
+        ),
         row("re-assembly all / matvec", ratio("update() all", "matvec torch COO", den_src="o")),
         row("re-assembly L_c+M_z / libigl CR (edge map given)", ratio("re-assembly L_c+M_z", "igl CR L+M")),
         row(f"**peak RSS, torch_edgevf process** (target < {TARGET_PEAK_BYTES / 1e9:g} GB)", peak),
@@ -302,8 +329,10 @@ def report(cases: list[str], results: dict, info: dict) -> str:
         row("  peak in first L_c + M_z", lambda o, p: fmt_bytes(o["peak_rss_stages"].get("first_lc_mz"))),
         row("  RSS after imports and mesh", lambda o, p: fmt_bytes(o.get("rss_after_load"))),
         row("peak RSS, libigl process", lambda o, p: fmt_bytes(p.get("peak_rss"))),
-        row("L_c^(0) vs libigl CR, max abs diff", lambda o, p: "-" if p.get("cr_max_abs_diff") is None
-            else f"{p['cr_max_abs_diff']:.1e}"),
+        row(
+            "L_c^(0) vs libigl CR, max abs diff",
+            lambda o, p: "-" if p.get("cr_max_abs_diff") is None else f"{p['cr_max_abs_diff']:.1e}",
+        ),
         row("repeats (assembly / matvec)", lambda o, p: "{} / {}".format(*repeats_for(o["faces"]))),
         row("1-min load average before the run", lambda o, p: f"{o.get('load_before', 0):.1f}"),
     ]
@@ -313,7 +342,8 @@ def report(cases: list[str], results: dict, info: dict) -> str:
         "",
         f"Machine: {info['cores']} cores ({info['cpu']}), {fmt_bytes(mem)} RAM, {info['platform']}; "
         f"load average at start {info.get('load_average')}.",
-        f"torch {info['torch']} ({info.get('torch_threads')} intra-op threads, default), numpy {info['numpy']}, "
+        f"torch {info['torch']} ({info.get('torch_threads')} intra-op threads, default), "
+        f"numpy {info['numpy']}, "
         f"scipy {info['scipy']}, libigl {info.get('igl')}; Python {info['python']}. "
         "Meshes are float64; `L_c` is n = 1 (complex128). "
         f"OMP_WAIT_POLICY={info.get('omp_wait_policy')} in the workers (on a shared, loaded machine "
@@ -337,11 +367,18 @@ def main(argv=None) -> int:
     parser.add_argument("--check", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--no-peers", action="store_true", help="skip libigl")
     parser.add_argument("--output", type=Path, help="also write the markdown report here")
-    parser.add_argument("--omp-wait-policy", default="default",
-                        help="OMP_WAIT_POLICY of the workers ('default' leaves it unset; PASSIVE on a shared, "
-                             "loaded machine)")
-    parser.add_argument("--allocator", choices=["default", "tuned"], default="default",
-                        help="'tuned' calls torch_edgevf.tune_allocator() in both workers (ours and libigl's)")
+    parser.add_argument(
+        "--omp-wait-policy",
+        default="default",
+        help="OMP_WAIT_POLICY of the workers ('default' leaves it unset; PASSIVE on a shared, "
+        "loaded machine)",
+    )
+    parser.add_argument(
+        "--allocator",
+        choices=["default", "tuned"],
+        default="default",
+        help="'tuned' calls torch_edgevf.tune_allocator() in both workers (ours and libigl's)",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
 
@@ -365,7 +402,9 @@ def main(argv=None) -> int:
         results[name] = {"edgevf": run_worker([script, "--worker", "edgevf", "--mesh", name], env=env)}
         if not args.no_peers:
             check = ["--check"] if results[name]["edgevf"]["faces"] < 500_000 else []
-            results[name]["peers"] = run_worker([script, "--worker", "peers", "--mesh", name, *check], env=env)
+            results[name]["peers"] = run_worker(
+                [script, "--worker", "peers", "--mesh", name, *check], env=env
+            )
         gc.collect()
     text = report(cases, results, info)
     print(text)

@@ -43,8 +43,8 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import argparse
-import itertools
 import contextlib
+import itertools
 import json
 import logging
 import sys
@@ -156,20 +156,35 @@ def accuracy(level: int) -> dict:
     vector_exact = _exact(VECTOR_L, 1, lambda l: 2 * l + 1)  # 15 complex eigenvalues
     ks, kv = len(scalar_exact) + 1, len(vector_exact)
     ops: dict = {}
-    ops["ours: LB = G* M_z^-1 G, full M_v"] = (to_scipy(ev.laplace_beltrami(vt, topo)),
-                                               to_scipy(ev.vertex_mass(vt, topo)), "s")
-    ops["ours: CR scalar L_c^(0), M_z"] = (to_scipy(ev.connection_laplacian(vt, topo, 0)),
-                                           to_scipy(ev.mass_matrix(vt, topo)), "s")
-    ops["ours: cotan, lumped M_v"] = (to_scipy(ev.cotan_laplacian(vt, topo)),
-                                      to_scipy(ev.vertex_mass(vt, topo, lumped=True)), "s")
-    ops["ours: connection L_c^(1), M_z"] = (to_scipy(ev.connection_laplacian(vt, topo, 1)),
-                                            to_scipy(ev.mass_matrix(vt, topo)), "v")
+    ops["ours: LB = G* M_z^-1 G, full M_v"] = (
+        to_scipy(ev.laplace_beltrami(vt, topo)),
+        to_scipy(ev.vertex_mass(vt, topo)),
+        "s",
+    )
+    ops["ours: CR scalar L_c^(0), M_z"] = (
+        to_scipy(ev.connection_laplacian(vt, topo, 0)),
+        to_scipy(ev.mass_matrix(vt, topo)),
+        "s",
+    )
+    ops["ours: cotan, lumped M_v"] = (
+        to_scipy(ev.cotan_laplacian(vt, topo)),
+        to_scipy(ev.vertex_mass(vt, topo, lumped=True)),
+        "s",
+    )
+    ops["ours: connection L_c^(1), M_z"] = (
+        to_scipy(ev.connection_laplacian(vt, topo, 1)),
+        to_scipy(ev.mass_matrix(vt, topo)),
+        "v",
+    )
     igl = _peer("igl")
     if igl is not None:
         ops["libigl: cotmatrix, massmatrix (Voronoi)"] = (igl.cotmatrix(v, f), igl.massmatrix(v, f), "s")
         _, ue, emap = igl.unique_edge_map(f)[:3]
         ops["libigl: crouzeix_raviart_cotmatrix/massmatrix"] = (
-            igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(v, f, ue, emap), "s")
+            igl.crouzeix_raviart_cotmatrix(v, f, ue, emap),
+            igl.crouzeix_raviart_massmatrix(v, f, ue, emap),
+            "s",
+        )
     pp3d = _peer("pp3d")
     if pp3d is not None:
         area = sp.diags(pp3d.vertex_areas(v, f))
@@ -191,8 +206,14 @@ def accuracy(level: int) -> dict:
             vals = _smallest(L, M, kv)
             zero = None
             mean1, worst = _rel_errors(vals, vector_exact)
-        rows[name] = {"kind": kind, "first_group": mean1, "max": worst, "lambda0": zero,
-                      "values": vals.tolist(), "solve_s": time.perf_counter() - t0}
+        rows[name] = {
+            "kind": kind,
+            "first_group": mean1,
+            "max": worst,
+            "lambda0": zero,
+            "values": vals.tolist(),
+            "solve_s": time.perf_counter() - t0,
+        }
         log.info("ico%d %-48s l=1 %.2e max %.2e", level, name, mean1, worst)
     return {"mesh": label, "V": int(v.shape[0]), "F": int(f.shape[0]), "operators": rows}
 
@@ -216,7 +237,11 @@ def our_vector_heat(vt, ft, source_edge: int, prefactored=None):
         m_sp = torch.sparse_coo_tensor(torch.stack([eye, eye]), mass, (topo.num_edges,) * 2)
         a_vec = (m_sp.to(torch.complex128) + t * ev.connection_laplacian(vt, topo, 1)).coalesce()
         a_sca = (m_sp + t * ev.connection_laplacian(vt, topo, 0)).coalesce()
-        prefactored = (evla.SparseSolver(a_vec, hermitian=True), evla.SparseSolver(a_sca, hermitian=True), mass)
+        prefactored = (
+            evla.SparseSolver(a_vec, hermitian=True),
+            evla.SparseSolver(a_sca, hermitian=True),
+            mass,
+        )
     s_vec, s_sca, mass = prefactored
     ne = mass.shape[0]
     delta = torch.zeros(ne, dtype=torch.complex128)
@@ -269,9 +294,12 @@ def speed(name: str, diffusionnet: bool) -> dict:
 
     igl = _peer("igl")
     if igl is not None:
+
         def igl_cr():
             _, ue, emap = igl.unique_edge_map(f)[:3]
-            return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(v, f, ue, emap)
+            return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(
+                v, f, ue, emap
+            )
 
         record("igl CR L+M", igl_cr)
         record("igl cot L+M", lambda: (igl.cotmatrix(v, f), igl.massmatrix(v, f)))
@@ -294,8 +322,10 @@ def speed(name: str, diffusionnet: bool) -> dict:
     _, fac = our_vector_heat(vt, ft, source_edge)
     record("ours vector heat (prefactored)", lambda: our_vector_heat(vt, ft, source_edge, fac)[0])
     if pp3d is not None:
-        record("pp3d vector heat (build+solve)",
-               lambda: pp3d.MeshVectorHeatSolver(v, f).transport_tangent_vector(0, [1.0, 0.0]))
+        record(
+            "pp3d vector heat (build+solve)",
+            lambda: pp3d.MeshVectorHeatSolver(v, f).transport_tangent_vector(0, [1.0, 0.0]),
+        )
         solver = pp3d.MeshVectorHeatSolver(v, f)
         solver.transport_tangent_vector(0, [1.0, 0.0])  # lets it factor whatever it factors lazily
         record("pp3d vector heat (prefactored)", lambda: solver.transport_tangent_vector(0, [1.0, 0.0]))
@@ -385,7 +415,7 @@ def diffusionnet_reference(v, f, k: int = K_DIFFUSIONNET) -> dict:
             failcount += 1
             if failcount > 3:
                 raise
-            l_eigsh = l_eigsh + sp.identity(L.shape[0]) * (eps * 10 ** failcount)
+            l_eigsh = l_eigsh + sp.identity(L.shape[0]) * (eps * 10**failcount)
     times["eigenbasis"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
@@ -395,7 +425,6 @@ def diffusionnet_reference(v, f, k: int = K_DIFFUSIONNET) -> dict:
     edge_vecs = edge_vecs - (edge_vecs * nrm[edges[0]]).sum(1, keepdims=True) * nrm[edges[0]]
     etv = np.stack([(edge_vecs * bx[edges[0]]).sum(1), (edge_vecs * by[edges[0]]).sum(1)], axis=-1)
     grad = _dn_build_grad(v, edges, etv)
-    grad_x, grad_y = np.real(grad), np.imag(grad)
     times["gradient"] = time.perf_counter() - t0
     times["total"] = sum(times.values())
     return {"times": times, "evals": evals[:8].tolist(), "grad_nnz": int(grad.nnz)}
@@ -417,7 +446,11 @@ def diffusionnet_ours(v, f, k: int = K_DIFFUSIONNET) -> dict:
     G = ev.gradient(vt, topo)
     times["gradient"] = time.perf_counter() - t0
     times["total"] = sum(times.values())
-    return {"times": times, "evals": pairs.values[:8].tolist(), "grad_nnz": int(G.coalesce().values().numel())}
+    return {
+        "times": times,
+        "evals": pairs.values[:8].tolist(),
+        "grad_nnz": int(G.coalesce().values().numel()),
+    }
 
 
 def diffusionnet_compare(v, f) -> dict:
@@ -440,8 +473,10 @@ def report(acc: list, spd: list) -> str:
     parts = []
     if acc:
         parts.append("### Accuracy: sphere spectra (relative eigenvalue errors)\n")
-        parts.append("Scalar: 15 nonzero eigenvalues vs l(l+1), l = 1..3. Vector (complex): 15 eigenvalues vs "
-                     "l(l+1) - 1, l = 1..3. Cells: mean error of the l = 1 group / max error over all 15.\n")
+        parts.append(
+            "Scalar: 15 nonzero eigenvalues vs l(l+1), l = 1..3. Vector (complex): 15 eigenvalues vs "
+            "l(l+1) - 1, l = 1..3. Cells: mean error of the l = 1 group / max error over all 15.\n"
+        )
         names = list(acc[0]["operators"])
         rows = []
         for name in names:
@@ -453,15 +488,32 @@ def report(acc: list, spd: list) -> str:
         parts.append(markdown_table(["operator"] + [f"ico{a['mesh'][3:]} (V={a['V']})" for a in acc], rows))
     if spd:
         groups = [
-            ("Scalar Crouzeix-Raviart Laplacian + mass (first assembly, edge map / topology included)",
-             "ours CR L+M", ["igl CR L+M"]),
-            ("Vertex cotan Laplacian + mass", "ours cot L+M", ["igl cot L+M", "pp3d cot L+M", "robust_laplacian L+M"]),
-            ("Connection Laplacian + mass (ours: edges, n = 1; pp3d: vertices, MeshVectorHeatSolver build)",
-             "ours L_c+M", ["pp3d connection L+M (solver build)"]),
-            ("Vector heat transport, one source: build + factor + solve",
-             "ours vector heat (build+factor+solve)", ["pp3d vector heat (build+solve)"]),
-            ("Vector heat transport, one source: prefactored solve", "ours vector heat (prefactored)",
-             ["pp3d vector heat (prefactored)"]),
+            (
+                "Scalar Crouzeix-Raviart Laplacian + mass (first assembly, edge map / topology included)",
+                "ours CR L+M",
+                ["igl CR L+M"],
+            ),
+            (
+                "Vertex cotan Laplacian + mass",
+                "ours cot L+M",
+                ["igl cot L+M", "pp3d cot L+M", "robust_laplacian L+M"],
+            ),
+            (
+                "Connection Laplacian + mass "
+                "(ours: edges, n = 1; pp3d: vertices, MeshVectorHeatSolver build)",
+                "ours L_c+M",
+                ["pp3d connection L+M (solver build)"],
+            ),
+            (
+                "Vector heat transport, one source: build + factor + solve",
+                "ours vector heat (build+factor+solve)",
+                ["pp3d vector heat (build+solve)"],
+            ),
+            (
+                "Vector heat transport, one source: prefactored solve",
+                "ours vector heat (prefactored)",
+                ["pp3d vector heat (prefactored)"],
+            ),
         ]
         for title, ours_key, peers in groups:
             parts.append(f"\n### {title}\n")
@@ -478,10 +530,14 @@ def report(acc: list, spd: list) -> str:
             parts.append(markdown_table(heads, rows))
         dn = [s for s in spd if s.get("diffusionnet")]
         if dn:
-            parts.append("\n### DiffusionNet-style precompute (k = 128 eigenbasis + gradient), one run each\n")
-            parts.append("Reference: robust_laplacian + scipy eigsh (shift-invert ARPACK) + per-vertex "
-                         "least-squares gradient in a Python loop, as diffusion_net.geometry.compute_operators. "
-                         "Ours: cotan Laplacian + torch_edgevf.linalg.eigsh + edge gradient G.\n")
+            parts.append(
+                "\n### DiffusionNet-style precompute (k = 128 eigenbasis + gradient), one run each\n"
+            )
+            parts.append(
+                "Reference: robust_laplacian + scipy eigsh (shift-invert ARPACK) + per-vertex "
+                "least-squares gradient in a Python loop, as diffusion_net.geometry.compute_operators. "
+                "Ours: cotan Laplacian + torch_edgevf.linalg.eigsh + edge gradient G.\n"
+            )
             rows = []
             for s in dn:
                 ref, ours = s["diffusionnet"]["reference"], s["diffusionnet"]["ours"]
@@ -491,8 +547,20 @@ def report(acc: list, spd: list) -> str:
                     row += [f"{fmt_time(rt.get(step))} / {fmt_time(ot[step])}"]
                 row.append(_ratio(rt.get("total"), ot["total"]))
                 rows.append(row)
-            parts.append(markdown_table(["mesh", "V", "Laplacian ref / ours", "eigenbasis ref / ours",
-                                         "gradient ref / ours", "total ref / ours", "ratio"], rows))
+            parts.append(
+                markdown_table(
+                    [
+                        "mesh",
+                        "V",
+                        "Laplacian ref / ours",
+                        "eigenbasis ref / ours",
+                        "gradient ref / ours",
+                        "total ref / ours",
+                        "ratio",
+                    ],
+                    rows,
+                )
+            )
     if _MISSING:
         parts.append("\nNot installed (skipped): " + ", ".join(f"{k} ({v})" for k, v in _MISSING.items()))
     return "\n".join(parts)
@@ -508,9 +576,13 @@ def main(argv=None) -> int:
     parser.add_argument("--no-diffusionnet", action="store_true")
     parser.add_argument("--diffusionnet-max-vertices", type=int, default=50_000)
     parser.add_argument("--json", type=Path, default=RESULTS / "peers.json")
-    parser.add_argument("--blas-threads", type=int, default=1,
-                        help="BLAS threads for everyone (torch_edgevf's eigensolver uses 1 anyway); "
-                             "0 leaves BLAS alone. Oversubscribed OpenBLAS made ARPACK 10x noisier here")
+    parser.add_argument(
+        "--blas-threads",
+        type=int,
+        default=1,
+        help="BLAS threads for everyone (torch_edgevf's eigensolver uses 1 anyway); "
+        "0 leaves BLAS alone. Oversubscribed OpenBLAS made ARPACK 10x noisier here",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s", stream=sys.stderr)
     if args.quick:
@@ -529,15 +601,19 @@ def main(argv=None) -> int:
         acc, spd = _run(args)
     info["load_average_after"] = [round(x, 2) for x in os.getloadavg()]
     text = report(acc, spd)
-    header = (f"Machine: {info.get('cpu')}, {info.get('cores')} cores, torch {info.get('torch')} "
-              f"({info.get('torch_threads')} threads, OMP_WAIT_POLICY={info.get('omp_wait_policy')}, "
-              f"BLAS threads {info['blas_threads']}), libigl {info.get('igl')}, potpourri3d "
-              f"{info.get('potpourri3d')}, robust_laplacian {info.get('robust_laplacian')}; load "
-              f"{info.get('load_average')} before, {info['load_average_after']} after.\n")
+    header = (
+        f"Machine: {info.get('cpu')}, {info.get('cores')} cores, torch {info.get('torch')} "
+        f"({info.get('torch_threads')} threads, OMP_WAIT_POLICY={info.get('omp_wait_policy')}, "
+        f"BLAS threads {info['blas_threads']}), libigl {info.get('igl')}, potpourri3d "
+        f"{info.get('potpourri3d')}, robust_laplacian {info.get('robust_laplacian')}; load "
+        f"{info.get('load_average')} before, {info['load_average_after']} after.\n"
+    )
     print(header)
     print(text)
     args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps({"machine": info, "accuracy": acc, "speed": spd}, indent=1, default=float))
+    args.json.write_text(
+        json.dumps({"machine": info, "accuracy": acc, "speed": spd}, indent=1, default=float)
+    )
     log.info("wrote %s", args.json)
     return 0
 

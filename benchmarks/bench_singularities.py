@@ -50,14 +50,19 @@ def run(name, verts, faces, z, round_integers, repeats):
     topo = Topology(faces, verts.shape[0])
     t_det, s = timed(lambda: singularities(verts, topo, z, n=4), repeats)
     t_par, P = timed(lambda: parametrize(verts, topo, z, round_integers=round_integers), 1)
-    row = (f"| {name} | {topo.num_faces:,} | {t_det:.3f} | {s.num_singularities} | {s.total:g} | "
-           f"{t_par:.2f} | {'yes' if round_integers else 'no'} | {P.flipped} |")
+    row = (
+        f"| {name} | {topo.num_faces:,} | {t_det:.3f} | {s.num_singularities} | {s.total:g} | "
+        f"{t_par:.2f} | {'yes' if round_integers else 'no'} | {P.flipped} |"
+    )
     print(row, flush=True)
     return row
 
 
 def main(large: bool = False, repeats: int = 3):
-    print("| mesh | faces | singularities (s) | singular regions | index sum | parametrize (s) | rounding | flipped |")
+    print(
+        "| mesh | faces | singularities (s) | singular regions | index sum | parametrize (s) "
+        "| rounding | flipped |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     rows = []
     if SPOT.exists():

@@ -17,9 +17,9 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +47,13 @@ class Timing:
         return min(self.times)
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "times": self.times, "median": self.median, "min": self.min,
-                "cpu_times": self.cpu_times}
+        return {
+            "name": self.name,
+            "times": self.times,
+            "median": self.median,
+            "min": self.min,
+            "cpu_times": self.cpu_times,
+        }
 
 
 def time_it(
@@ -136,7 +141,7 @@ class PeakMemory:
     >>> pm.peak, pm.before
     """
 
-    def __enter__(self) -> "PeakMemory":
+    def __enter__(self) -> PeakMemory:
         gc.collect()
         self.exact = False
         try:
@@ -207,8 +212,14 @@ def machine_info() -> dict:
         pass
     from importlib import metadata
 
-    for key, dist in (("torch", "torch"), ("numpy", "numpy"), ("scipy", "scipy"), ("igl", "libigl"),
-                      ("potpourri3d", "potpourri3d"), ("robust_laplacian", "robust_laplacian")):
+    for key, dist in (
+        ("torch", "torch"),
+        ("numpy", "numpy"),
+        ("scipy", "scipy"),
+        ("igl", "libigl"),
+        ("potpourri3d", "potpourri3d"),
+        ("robust_laplacian", "robust_laplacian"),
+    ):
         try:
             info[key] = metadata.version(dist)
         except metadata.PackageNotFoundError:
@@ -237,8 +248,14 @@ def run_worker(args: Sequence[str], timeout: float | None = None, env: dict | No
     log.info("running %s", " ".join(cmd[1:]))
     t0 = time.perf_counter()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
-    proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=None, text=True, timeout=timeout,
-                          env=None if env is None else {**os.environ, **env})
+    proc = subprocess.run(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=None,
+        text=True,
+        timeout=timeout,
+        env=None if env is None else {**os.environ, **env},
+    )
     if proc.returncode != 0:
         raise RuntimeError(f"worker {' '.join(cmd[1:])} failed with exit code {proc.returncode}")
     lines = [line for line in proc.stdout.splitlines() if line.strip()]
@@ -277,7 +294,13 @@ def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[object]], ali
     rule = {"l": ":{}", "r": "{}:", "c": ":{}:"}
 
     def line(row):
-        return "| " + " | ".join(c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(row, widths, align)) + " |"
+        return (
+            "| "
+            + " | ".join(c.ljust(w) if a == "l" else c.rjust(w) for c, w, a in zip(row, widths, align))
+            + " |"
+        )
 
-    sep = "|" + "|".join(rule[a].format("-" * (w + 2 - len(rule[a]) + 2)) for w, a in zip(widths, align)) + "|"
+    sep = (
+        "|" + "|".join(rule[a].format("-" * (w + 2 - len(rule[a]) + 2)) for w, a in zip(widths, align)) + "|"
+    )
     return "\n".join([line(cells[0]), sep, *map(line, cells[1:])])

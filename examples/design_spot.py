@@ -33,7 +33,8 @@ def load_default_mesh():
 
         mesh = trimesh.load("/work/shared/meshes/spot_low_resolution.obj", process=True, force="mesh")
         return torch.from_numpy(np.asarray(mesh.vertices, dtype=np.float64)), torch.from_numpy(
-            np.asarray(mesh.faces, dtype=np.int64))
+            np.asarray(mesh.faces, dtype=np.int64)
+        )
     mesh = default_mesh()
     return mesh.verts, mesh.faces
 
@@ -77,8 +78,11 @@ def main(mesh=None, out_dir="out", n: int = 4) -> dict:
         "alignment": {"smoothest": abs(alignment(z_smooth)), "curvature": alignment(z_curv)},
     }
     log.info("smoothest %d-field: eigenvalue %.6g", n, result["eigenvalue"])
-    log.info("alignment with the curvature directions: smoothest %.3f, curvature-aligned %.3f",
-             result["alignment"]["smoothest"], result["alignment"]["curvature"])
+    log.info(
+        "alignment with the curvature directions: smoothest %.3f, curvature-aligned %.3f",
+        result["alignment"]["smoothest"],
+        result["alignment"]["curvature"],
+    )
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -24,8 +24,15 @@ from torch_edgevf.losses import laplace_beltrami_spectrum, spectral_loss
 log = logging.getLogger(__name__)
 
 
-def main(level: int = 2, k: int = 10, steps: int = 150, lr: float = 5e-3, axes=(1.0, 0.8, 0.6),
-         smoothing: float = 1e-3, seed: int = 0) -> dict:
+def main(
+    level: int = 2,
+    k: int = 10,
+    steps: int = 150,
+    lr: float = 5e-3,
+    axes=(1.0, 0.8, 0.6),
+    smoothing: float = 1e-3,
+    seed: int = 0,
+) -> dict:
     """Optimise an icosphere towards the spectrum of an ellipsoid.
 
     Returns
@@ -57,15 +64,25 @@ def main(level: int = 2, k: int = 10, steps: int = 150, lr: float = 5e-3, axes=(
     final = laplace_beltrami_spectrum(verts.detach(), topo, k)
     initial = laplace_beltrami_spectrum(v0, topo, k)
     rel = lambda lam: float(((lam[1:] - target[1:]) / target[1:]).abs().max())  # noqa: E731
-    return {"losses": losses, "initial_error": rel(initial), "final_error": rel(final), "target": target,
-            "final": final, "verts": verts.detach(), "faces": faces, "seconds": time.perf_counter() - start}
+    return {
+        "losses": losses,
+        "initial_error": rel(initial),
+        "final_error": rel(final),
+        "target": target,
+        "final": final,
+        "verts": verts.detach(),
+        "faces": faces,
+        "seconds": time.perf_counter() - start,
+    }
 
 
 if __name__ == "__main__":
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = main()
-    print(f"spectral loss: {out['losses'][0]:.3e} -> {out['losses'][-1]:.3e} in {len(out['losses'])} steps "
-          f"({out['seconds']:.1f} s)")
+    print(
+        f"spectral loss: {out['losses'][0]:.3e} -> {out['losses'][-1]:.3e} in {len(out['losses'])} steps "
+        f"({out['seconds']:.1f} s)"
+    )
     print(f"largest relative eigenvalue error: {out['initial_error']:.3f} -> {out['final_error']:.3f}")
     print("target:", [round(x, 3) for x in out["target"].tolist()])
     print("final: ", [round(x, 3) for x in out["final"].tolist()])

@@ -62,14 +62,25 @@ def _guides(v, f, noise: float, g: torch.Generator):
     topo = ev.Topology(f, v.shape[0])
     G, m = ev.gradient(v, topo), ev.mass_matrix(v, topo).values()
     clean = gradient_features(v[:, :1], G, m)[:, 0]
-    phase = torch.polar(torch.ones_like(clean.real), noise * torch.pi * (2 * torch.rand(clean.shape, generator=g,
-                                                                                            dtype=clean.real.dtype) - 1))
+    phase = torch.polar(
+        torch.ones_like(clean.real),
+        noise * torch.pi * (2 * torch.rand(clean.shape, generator=g, dtype=clean.real.dtype) - 1),
+    )
     scale = torch.rand(clean.shape, generator=g, dtype=clean.real.dtype) * 2
     return topo, clean, clean * phase * scale
 
 
-def main(num_train: int = 6, num_test: int = 2, level: int = 2, epochs: int = 40, width: int = 8,
-         beta: float = 0.02, noise: float = 0.6, lr: float = 1e-2, seed: int = 0) -> dict:
+def main(
+    num_train: int = 6,
+    num_test: int = 2,
+    level: int = 2,
+    epochs: int = 40,
+    width: int = 8,
+    beta: float = 0.02,
+    noise: float = 0.6,
+    lr: float = 1e-2,
+    seed: int = 0,
+) -> dict:
     """Train :class:`FieldNet`; returns losses and held-out measurements."""
     torch.manual_seed(seed)
     g = torch.Generator().manual_seed(seed)
@@ -78,7 +89,9 @@ def main(num_train: int = 6, num_test: int = 2, level: int = 2, epochs: int = 40
         v, f = _mesh(level, g)
         topo, clean, noisy = _guides(v, f, noise, g)
         ops = data.compute_operators(v, topo, k_edge=24, k_vertex=8)
-        hks = data.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=4, area=ops.face_area.sum())
+        hks = data.heat_kernel_signature(
+            ops.vertex_evals, ops.vertex_evecs, count=4, area=ops.face_area.sum()
+        )
         feats = torch.cat([hks, v], dim=1).float()
         batch = data.MeshBatch.from_operators(ops.to(torch.float32), feats)
         items.append((v.float(), topo, clean.to(torch.complex64), noisy.to(torch.complex64), batch))
@@ -103,13 +116,15 @@ def main(num_train: int = 6, num_test: int = 2, level: int = 2, epochs: int = 40
         rows = []
         for v, topo, clean, noisy, batch in test:
             z = net(batch)[:, 0]
-            rows.append({
-                "align_clean_pred": float(alignment_loss(v, topo, z, clean)),
-                "align_clean_noisy": float(alignment_loss(v, topo, noisy, clean)),
-                "smooth_pred": float(smoothness_loss(v, topo, z)),
-                "smooth_noisy": float(smoothness_loss(v, topo, noisy)),
-                "smooth_clean": float(smoothness_loss(v, topo, clean)),
-            })
+            rows.append(
+                {
+                    "align_clean_pred": float(alignment_loss(v, topo, z, clean)),
+                    "align_clean_noisy": float(alignment_loss(v, topo, noisy, clean)),
+                    "smooth_pred": float(smoothness_loss(v, topo, z)),
+                    "smooth_noisy": float(smoothness_loss(v, topo, noisy)),
+                    "smooth_clean": float(smoothness_loss(v, topo, clean)),
+                }
+            )
     mean = {k: sum(r[k] for r in rows) / len(rows) for k in rows[0]}
     return {"losses": history, "test": mean, "seconds": time.perf_counter() - start}
 

@@ -11,8 +11,8 @@ import logging
 import numpy as np
 
 from torch_edgevf.fields.design import curvature_aligned_field
-from torch_edgevf.io import default_mesh
 from torch_edgevf.fields.param import parametrize
+from torch_edgevf.io import default_mesh
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +25,11 @@ def main(mesh=None, scale: float | None = None, round_integers: bool = True):
     tr = P.translations.numpy()
     log.info(
         "%d faces, %d cones, %d cut edges, %d flipped faces, energy %.4g, max |t - round(t)| = %.2g",
-        P.faces.shape[0], P.singular_vertices.numel(), int(P.cut_edges.sum()), P.flipped, P.energy,
+        P.faces.shape[0],
+        P.singular_vertices.numel(),
+        int(P.cut_edges.sum()),
+        P.flipped,
+        P.energy,
         float(np.abs(tr - np.rint(tr)).max(initial=0.0)),
     )
     return P

@@ -9,8 +9,8 @@ from __future__ import annotations
 import logging
 
 from torch_edgevf.fields.design import smoothest_field
-from torch_edgevf.io import default_mesh
 from torch_edgevf.fields.singularities import locate_singularities, singularities
+from torch_edgevf.io import default_mesh
 
 log = logging.getLogger(__name__)
 

@@ -4,8 +4,9 @@ The rotation field ``w = e_z x p`` is transported along itself 1, 2 and 3 times 
 globe (``t = 2 pi k``). Parallel transport along a latitude at colatitude ``theta`` turns a
 vector by ``2 pi k cos(theta)`` relative to ``w``; the norm is preserved. Prints the norm and
 L2 errors per turn. Without regularization the semi-discrete flow blows up within one
-turn (a few spurious growing modes; the thesis: "the solution quickly diverges"); light smoothing with the connection Laplacian (as in the
-thesis) damps the dispersion of the semi-discrete transport.
+turn (a few spurious growing modes; the thesis: "the solution quickly diverges"); light
+smoothing with the connection Laplacian (as in the thesis) damps the dispersion of the
+semi-discrete transport.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ import math
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.mesh.topology import Topology
 from torch_edgevf.fields.transport import Transporter
+from torch_edgevf.mesh.topology import Topology
 
 log = logging.getLogger(__name__)
 

@@ -240,9 +240,7 @@ def connection_laplacian(verts, faces, n: int = 1) -> np.ndarray:
                 if b == a:
                     continue
                 c = 3 - a - b
-                L[fe[t, a], fe[t, b]] += (
-                    -lengths[a] * lengths[b] * np.cos(angles[c]) / area * r[b, a] ** n
-                )
+                L[fe[t, a], fe[t, b]] += -lengths[a] * lengths[b] * np.cos(angles[c]) / area * r[b, a] ** n
     return L
 
 
@@ -365,9 +363,7 @@ def covariant_derivative(verts, faces, w) -> np.ndarray:
             wa = w[fe[t, a]]
             for b in range(3):
                 # r[a, a] = 1, so the diagonal formula is the same expression.
-                D[fe[t, a], fe[t, b]] += (
-                    -deltas[b] * lengths[b] / 3.0 * np.imag(wa * r[a, b]) * r[b, a]
-                )
+                D[fe[t, a], fe[t, b]] += -deltas[b] * lengths[b] / 3.0 * np.imag(wa * r[a, b]) * r[b, a]
     return D
 
 
@@ -459,9 +455,7 @@ def _orient_outward(verts, faces):
 
 def octahedron():
     """Regular octahedron with outward (counter-clockwise) faces: 6 vertices, 8 faces."""
-    verts = np.array(
-        [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64
-    )
+    verts = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
     faces = []
     for x in (0, 1):
         for y in (2, 3):
@@ -565,9 +559,7 @@ def random_mesh(seed: int, kind: str = "sphere", noise: float = 0.15):
     elif kind in ("flat", "bumpy"):
         verts, faces = grid_mesh(4, jitter=0.25, seed=int(rng.integers(1 << 30)))
         theta = rng.uniform(0, 2 * np.pi)
-        rot = np.array(
-            [[np.cos(theta), -np.sin(theta), 0], [np.sin(theta), np.cos(theta), 0], [0, 0, 1]]
-        )
+        rot = np.array([[np.cos(theta), -np.sin(theta), 0], [np.sin(theta), np.cos(theta), 0], [0, 0, 1]])
         verts = verts @ rot.T + np.array([rng.normal(), rng.normal(), 0.0])
         if kind == "bumpy":
             a, b, c = rng.normal(size=3)

@@ -59,7 +59,10 @@ def test_heat_kernel_signature_invariances():
     h2 = data.heat_kernel_signature(o2.vertex_evals, o2.vertex_evecs, count=5, area=o2.face_area.sum())
     torch.testing.assert_close(h2, h)  # scale normalised
     flipped = o.vertex_evecs * torch.tensor([1.0, -1.0] * 4, dtype=torch.float64)
-    torch.testing.assert_close(data.heat_kernel_signature(o.vertex_evals, flipped, count=5), data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=5))
+    torch.testing.assert_close(
+        data.heat_kernel_signature(o.vertex_evals, flipped, count=5),
+        data.heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=5),
+    )
     with pytest.raises(ValueError, match="do not match"):
         data.heat_kernel_signature(o.vertex_evals[:3], o.vertex_evecs)
 
@@ -75,21 +78,21 @@ def test_collate_offsets_and_block_diagonal(two_meshes):
     assert batch.vertex_offsets.tolist() == [0, oa.num_vertices, oa.num_vertices + ob.num_vertices]
     assert batch.edge_offsets.tolist() == [0, oa.num_edges, oa.num_edges + ob.num_edges]
     assert batch.labels.tolist() == [1, 2] and batch.indices.tolist() == [1, 2]
-    assert torch.equal(batch.edges[oa.num_edges:], ob.edges + oa.num_vertices)
-    assert torch.equal(batch.faces[oa.num_faces:], ob.faces + oa.num_vertices)
-    assert torch.equal(batch.face_edges[oa.num_faces:], ob.face_edges + oa.num_edges)
+    assert torch.equal(batch.edges[oa.num_edges :], ob.edges + oa.num_vertices)
+    assert torch.equal(batch.faces[oa.num_faces :], ob.faces + oa.num_vertices)
+    assert torch.equal(batch.face_edges[oa.num_faces :], ob.face_edges + oa.num_edges)
     assert torch.equal(batch.edge_batch, torch.tensor([0] * oa.num_edges + [1] * ob.num_edges))
     assert torch.equal(batch.face_batch.bincount(), torch.tensor([oa.num_faces, ob.num_faces]))
     G = batch.gradient.to_dense()
-    torch.testing.assert_close(G[:oa.num_edges, :oa.num_vertices], oa.gradient.to_dense())
-    torch.testing.assert_close(G[oa.num_edges:, oa.num_vertices:], ob.gradient.to_dense())
-    assert G[:oa.num_edges, oa.num_vertices:].abs().max() == 0
+    torch.testing.assert_close(G[: oa.num_edges, : oa.num_vertices], oa.gradient.to_dense())
+    torch.testing.assert_close(G[oa.num_edges :, oa.num_vertices :], ob.gradient.to_dense())
+    assert G[: oa.num_edges, oa.num_vertices :].abs().max() == 0
     # block-diagonal products equal per-mesh products
     f = torch.randn(batch.num_vertices, 2, dtype=torch.float64)
     gz = batch.gradient @ f.to(torch.complex128)
-    torch.testing.assert_close(gz[oa.num_edges:], ob.gradient @ f[oa.num_vertices:].to(torch.complex128))
+    torch.testing.assert_close(gz[oa.num_edges :], ob.gradient @ f[oa.num_vertices :].to(torch.complex128))
     Lc = batch.connection_laplacian.to_dense()
-    torch.testing.assert_close(Lc[oa.num_edges:, oa.num_edges:], ob.connection_laplacian.to_dense())
+    torch.testing.assert_close(Lc[oa.num_edges :, oa.num_edges :], ob.connection_laplacian.to_dense())
     assert batch.edge_evals.shape == (2, 8) and batch.edge_evecs.shape == (batch.num_edges, 8)
     assert batch.vertex_gradient.shape == (batch.num_vertices, batch.num_vertices)
 
@@ -113,8 +116,9 @@ def test_collate_errors(two_meshes):
 
 def test_dataloader_with_two_workers(two_meshes):
     samples = list(two_meshes) * 3
-    loader = torch.utils.data.DataLoader(samples, batch_size=2, shuffle=False, num_workers=2,
-                                         collate_fn=data.collate_meshes)
+    loader = torch.utils.data.DataLoader(
+        samples, batch_size=2, shuffle=False, num_workers=2, collate_fn=data.collate_meshes
+    )
     batches = list(loader)
     assert len(batches) == 3
     for got in batches:
@@ -231,8 +235,8 @@ def _psb_mesh(pid):
         pytest.skip("PSB file not available")
     d = np.load(PSB, allow_pickle=False)
     i = int(np.nonzero(d["psb_ids"] == pid)[0][0])
-    v = d["verts"][d["vert_offsets"][i]:d["vert_offsets"][i + 1]]
-    f = d["faces"][d["face_offsets"][i]:d["face_offsets"][i + 1]].astype(np.int64)
+    v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]]
+    f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
     return v, f
 
 

@@ -74,8 +74,9 @@ def test_one_off_functions_match_the_designer():
     edges, vals = torch.tensor([3, 7]), torch.tensor([1.0 + 0j, -0.5j], dtype=C128)
     assert torch.allclose(D.constrained_field(v, f, edges, vals, n=2), d.constrained(edges, vals))
     assert torch.allclose(D.heat_diffuse(v, f, w, 2.0, n=2), d.diffuse(w, 2.0))
-    assert torch.allclose(D.heat_diffuse(v, f, w, 2.0, n=2, method="implicit", steps=3),
-                          d.diffuse(w, 2.0, "implicit", 3))
+    assert torch.allclose(
+        D.heat_diffuse(v, f, w, 2.0, n=2, method="implicit", steps=3), d.diffuse(w, 2.0, "implicit", 3)
+    )
     assert torch.allclose(D.curvature_field(v, f, 2), d.curvature())
     d4 = D.FieldDesigner(v, f, 4)
     assert torch.allclose(D.curvature_aligned_field(v, f, 4), d4.curvature_aligned())
@@ -228,17 +229,25 @@ def test_constraint_errors(designer):
         d.constrained(torch.tensor([1, 2]), one)
     with pytest.raises(ValueError, match=r"directions must be nonzero .* at direction_edges \[5\]"):
         d.constrained(direction_edges=torch.tensor([4, 5]), directions=torch.tensor([1.0, 0.0], dtype=C128))
-    with pytest.raises(ValueError, match=r"contradictory constraints: edges given two different values \[3\]"):
+    with pytest.raises(
+        ValueError, match=r"contradictory constraints: edges given two different values \[3\]"
+    ):
         d.constrained(torch.tensor([3, 3]), torch.tensor([1.0, 2.0], dtype=C128))
-    with pytest.raises(ValueError, match=r"contradictory constraints: edges given two different directions \[3\]"):
+    with pytest.raises(
+        ValueError, match=r"contradictory constraints: edges given two different directions \[3\]"
+    ):
         d.constrained(direction_edges=torch.tensor([3, 3]), directions=torch.tensor([1.0, 1j], dtype=C128))
     with pytest.raises(ValueError, match=r"edges given both a value and a direction \[3\]"):
         d.constrained(torch.tensor([3]), one, torch.tensor([3]), one)
     with pytest.raises(ValueError, match=rf"the constraints fix all {ne} edges"):
         d.constrained(torch.arange(ne), torch.ones(ne, dtype=C128))
     # repeated identical constraints are accepted (and parallel directions too)
-    z = d.constrained(torch.tensor([3, 3]), torch.tensor([1.0, 1.0], dtype=C128),
-                      torch.tensor([4, 4]), torch.tensor([1.0 + 1j, 2.0 + 2j], dtype=C128))
+    z = d.constrained(
+        torch.tensor([3, 3]),
+        torch.tensor([1.0, 1.0], dtype=C128),
+        torch.tensor([4, 4]),
+        torch.tensor([1.0 + 1j, 2.0 + 2j], dtype=C128),
+    )
     assert abs(complex(z[3]) - 1) < 1e-12
     with pytest.raises(ValueError, match="mu_curl must be >= 0"):
         d.constrained(torch.tensor([3]), one, mu_curl=-1.0)
@@ -333,10 +342,10 @@ def _ellipsoid_max_directions(v, f, axes):
     a = torch.tensor(axes, dtype=v.dtype)
     c = v[f].mean(1)
     p = c / torch.sqrt(((c / a) ** 2).sum(1))[:, None]
-    grad = p / a ** 2
+    grad = p / a**2
     n = grad / grad.norm(dim=1, keepdim=True)
     proj = torch.eye(3, dtype=v.dtype) - n[:, :, None] * n[:, None, :]
-    shape = proj @ torch.diag(1 / a ** 2) @ proj / grad.norm(dim=1)[:, None, None]
+    shape = proj @ torch.diag(1 / a**2) @ proj / grad.norm(dim=1)[:, None, None]
     k, vec = torch.linalg.eigh(shape)  # ascending: 0 (normal), k_min, k_max
     return vec[:, :, 2], k[:, 2] - k[:, 1]
 
@@ -367,7 +376,9 @@ def test_curvature_directions_converge_on_an_ellipsoid():
     for key, errs in errors.items():
         rate = np.polyfit(np.log(hs), np.log(errs), 1)[0]
         assert all(b < a for a, b in zip(errs, errs[1:])), (key, errs)
-        assert rate > {"raw": 0.7, "diffused": 0.4}[key], f"{key}: observed rate {rate:.2f}, mean angle errors {errs}"
+        assert rate > {"raw": 0.7, "diffused": 0.4}[key], (
+            f"{key}: observed rate {rate:.2f}, mean angle errors {errs}"
+        )
     assert errors["diffused"][-1] < 0.01
 
 
@@ -455,17 +466,31 @@ def test_gradcheck_curl_free_and_constrained():
     v, f = _mesh(12)
     topo = Topology(f, v.shape[0])
     w = _weights(topo.num_edges, 1)
-    assert torch.autograd.gradcheck(lambda v: (w * D.curl_free_field(v, topo, 2.0).abs() ** 2).sum(), (v,), atol=1e-6, fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda v: (w * D.curl_free_field(v, topo, 2.0).abs() ** 2).sum(), (v,), atol=1e-6, fast_mode=True
+    )
     vals = torch.tensor([1.0 + 0.5j, -0.3j], dtype=C128, requires_grad=True)
     edges = torch.tensor([0, 17])
     dirs = torch.tensor([1.0 + 1j], dtype=C128)
     assert torch.autograd.gradcheck(
-        lambda v, vals: D.constrained_field(v, topo, edges, vals, torch.tensor([20]), dirs), (v, vals), atol=1e-6
+        lambda v, vals: D.constrained_field(v, topo, edges, vals, torch.tensor([20]), dirs),
+        (v, vals),
+        atol=1e-6,
     )
     assert torch.autograd.gradcheck(
-        lambda v: (w * D.constrained_field(v, topo, direction_edges=torch.tensor([20, 25]),
-                                           directions=torch.tensor([1.0, 1j], dtype=C128)).abs() ** 2).sum(),
-        (v,), atol=1e-6, fast_mode=True,
+        lambda v: (
+            w
+            * D.constrained_field(
+                v,
+                topo,
+                direction_edges=torch.tensor([20, 25]),
+                directions=torch.tensor([1.0, 1j], dtype=C128),
+            ).abs()
+            ** 2
+        ).sum(),
+        (v,),
+        atol=1e-6,
+        fast_mode=True,
     )
 
 
@@ -478,15 +503,23 @@ def _mesh_and_guide(seed=13):
 
 def test_gradcheck_exponential_diffusion():
     v, topo, guide = _mesh_and_guide()
-    assert torch.autograd.gradcheck(lambda v, w: D.heat_diffuse(v, topo, w, 1.5), (v, guide), atol=1e-6, fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda v, w: D.heat_diffuse(v, topo, w, 1.5), (v, guide), atol=1e-6, fast_mode=True
+    )
 
 
 def test_gradcheck_alignment_implicit_diffusion_curvature():
     v, topo, guide = _mesh_and_guide()
-    assert torch.autograd.gradcheck(lambda v, w: D.aligned_field(v, topo, w, -0.5), (v, guide), atol=1e-6, fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda v, w: D.aligned_field(v, topo, w, -0.5), (v, guide), atol=1e-6, fast_mode=True
+    )
     assert torch.autograd.gradcheck(
         lambda v, w: D.heat_diffuse(v, topo, w, 1.5, method="implicit", steps=2), (v, guide), atol=1e-6
     )
-    assert torch.autograd.gradcheck(lambda v: D.curvature_field(v, topo, 2, diffusion_time=0.0), (v,), atol=1e-6, fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda v: D.curvature_field(v, topo, 2, diffusion_time=0.0), (v,), atol=1e-6, fast_mode=True
+    )
     assert torch.autograd.gradcheck(lambda v: D.curvature_field(v, topo, 4), (v,), atol=1e-6, fast_mode=True)
-    assert torch.autograd.gradcheck(lambda v: D.curvature_aligned_field(v, topo, 2), (v,), atol=1e-6, fast_mode=True)
+    assert torch.autograd.gradcheck(
+        lambda v: D.curvature_aligned_field(v, topo, 2), (v,), atol=1e-6, fast_mode=True
+    )

@@ -1,6 +1,5 @@
 """The design example runs and its output makes sense (examples are tests)."""
 
-
 import numpy as np
 import torch
 

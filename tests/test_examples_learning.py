@@ -35,8 +35,17 @@ def _psb_subset(per_class_train=2, per_class_test=1, classes=(0, 1)):
 
 def test_train_psb_small(tmp_path):
     ids = _psb_subset()
-    out = load("train_psb").main(epochs=2, width=4, num_blocks=1, seeds=(0,), ids=ids, k_edge=8, k_vertex=8,
-                                 cache_dir=tmp_path, batch_size=2)
+    out = load("train_psb").main(
+        epochs=2,
+        width=4,
+        num_blocks=1,
+        seeds=(0,),
+        ids=ids,
+        k_edge=8,
+        k_vertex=8,
+        cache_dir=tmp_path,
+        batch_size=2,
+    )
     assert out["num_train"] == 4 and out["num_test"] == 2
     assert [r["model"] for r in out["results"]] == ["edge", "diffusionnet"]
     for r in out["results"]:
@@ -51,8 +60,17 @@ def test_train_psb_ddp_two_processes(tmp_path):
     started OpenMP threads) this test hung twice on 2026-11-23 and was marked slow.
     """
     ids = _psb_subset()
-    out = load("train_psb_ddp").main(world_size=2, max_steps=2, width=4, num_blocks=1, batch_size=1, ids=ids,
-                                     k_edge=8, k_vertex=8, cache_dir=tmp_path)
+    out = load("train_psb_ddp").main(
+        world_size=2,
+        max_steps=2,
+        width=4,
+        num_blocks=1,
+        batch_size=1,
+        ids=ids,
+        k_edge=8,
+        k_vertex=8,
+        cache_dir=tmp_path,
+    )
     assert out["world_size"] == 2 and out["steps"] == 2
     assert out["params_in_sync"]
     assert np.isfinite(out["losses"]).all() and 0.0 <= out["test_accuracy"] <= 1.0

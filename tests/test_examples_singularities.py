@@ -23,5 +23,5 @@ def test_param_spot():
 
 def test_transport_sphere():
     out = load("transport_sphere").main(level=3, turns=1, steps_per_turn=8, smoothing=1e-3)
-    (_, norm_err, err), = out
+    ((_, norm_err, err),) = out
     assert norm_err < 0.35 and err < 0.35, out  # measured 0.24 and 0.25

@@ -45,7 +45,10 @@ def tangent_part(p, vec):
 
 
 def test_nth_power_preserves_norm_and_multiplies_angle():
-    u = torch.polar(torch.tensor([0.5, 2.0, 3.0], dtype=torch.float64), torch.tensor([0.3, -1.0, 2.5], dtype=torch.float64))
+    u = torch.polar(
+        torch.tensor([0.5, 2.0, 3.0], dtype=torch.float64),
+        torch.tensor([0.3, -1.0, 2.5], dtype=torch.float64),
+    )
     for n in (1, 2, 3, 4):
         z = F.nth_power(u, n)
         assert torch.allclose(z.abs(), u.abs())
@@ -92,7 +95,9 @@ def test_linear_field_interpolates_exactly_on_a_plane(flat_noise):
         assert torch.allclose(F.point_vectors(v, topo, z, face, bary), fn(p), atol=1e-12)
         centroid = v[f].mean(1)
         assert torch.allclose(F.face_vectors(v, topo, z), fn(centroid), atol=1e-12)
-        assert torch.allclose(F.edge_vectors(v, topo, z), fn((v[topo.edges[:, 0]] + v[topo.edges[:, 1]]) / 2), atol=1e-12)
+        assert torch.allclose(
+            F.edge_vectors(v, topo, z), fn((v[topo.edges[:, 0]] + v[topo.edges[:, 1]]) / 2), atol=1e-12
+        )
     # a constant field is exact at vertices too (flat: no angle defect, no rescaling)
     z = planar_field(v, topo, lambda p: const.expand(p.shape[0], 3))
     assert torch.allclose(F.vertex_vectors(v, topo, z), const.expand(v.shape[0], 3), atol=1e-12)
@@ -133,8 +138,12 @@ def test_face_values_is_interpolation_at_barycenter_and_face_mean(closed_mesh):
         assert torch.allclose(F.face_values(v, topo, z, n), w)
     # mean over a face with the 3-point edge-midpoint rule (exact for linear functions)
     mids = torch.tensor([[0.0, 0.5, 0.5], [0.5, 0.0, 0.5], [0.5, 0.5, 0.0]], dtype=torch.float64)
-    vals = torch.stack([F.interpolate(v, topo, z, torch.arange(topo.num_faces), mids[k].expand(topo.num_faces, 3))
-                        for k in range(3)])
+    vals = torch.stack(
+        [
+            F.interpolate(v, topo, z, torch.arange(topo.num_faces), mids[k].expand(topo.num_faces, 3))
+            for k in range(3)
+        ]
+    )
     assert torch.allclose(vals.mean(0), F.face_values(v, topo, z))
 
 
@@ -144,8 +153,10 @@ def test_edges_from_vectors_inverts_edge_vectors(closed_mesh):
     v, f = closed_mesh
     topo = Topology(f)
     g = torch.Generator().manual_seed(3)
-    z = torch.complex(torch.randn(topo.num_edges, generator=g, dtype=torch.float64),
-                      torch.randn(topo.num_edges, generator=g, dtype=torch.float64))
+    z = torch.complex(
+        torch.randn(topo.num_edges, generator=g, dtype=torch.float64),
+        torch.randn(topo.num_edges, generator=g, dtype=torch.float64),
+    )
     vec = F.edge_vectors(v, topo, z)
     torch.testing.assert_close(F.edges_from_vectors(v, topo, vec), z)
     _, _, normal = F.edge_frames(v, topo)
@@ -167,7 +178,7 @@ def test_face_edge_coefficients_match_3d_frames(closed_mesh):
     xk = xe[topo.face_edges]  # (F, 3, 3)
     expected = torch.complex((xk * x[:, None]).sum(-1), (xk * y[:, None]).sum(-1))
     assert torch.allclose(u, expected, atol=1e-12)
-    assert torch.allclose(F.face_edge_coefficients(v, topo, 3), u ** 3)
+    assert torch.allclose(F.face_edge_coefficients(v, topo, 3), u**3)
 
 
 def test_frames_are_orthonormal(closed_mesh):
@@ -195,7 +206,9 @@ def test_smooth_field_evaluations_converge_on_the_sphere():
         e = topo.edges
         mid = (v[e[:, 0]] + v[e[:, 1]]) / 2
         err = [
-            (F.face_vectors(v, topo, z) - tangent_part(v[f].mean(1), ex.expand(topo.num_faces, 3))).norm(dim=1).max(),
+            (F.face_vectors(v, topo, z) - tangent_part(v[f].mean(1), ex.expand(topo.num_faces, 3)))
+            .norm(dim=1)
+            .max(),
             (F.vertex_vectors(v, topo, z) - tangent_part(v, ex.expand(v.shape[0], 3))).norm(dim=1).max(),
             (F.edge_vectors(v, topo, z) - tangent_part(mid, ex.expand(topo.num_edges, 3))).norm(dim=1).max(),
         ]
@@ -301,7 +314,9 @@ def test_errors(closed_mesh):
     z = torch.ones(topo.num_edges, dtype=C128)
     face = torch.tensor([0, 1])
     bary = torch.full((2, 3), 1 / 3, dtype=torch.float64)
-    with pytest.raises(ValueError, match=r"face_index out of range \(the mesh has 80 faces\) at points \[1\]"):
+    with pytest.raises(
+        ValueError, match=r"face_index out of range \(the mesh has 80 faces\) at points \[1\]"
+    ):
         F.interpolate(v, topo, z, torch.tensor([0, 80]), bary)
     with pytest.raises(ValueError, match="face_index must be an integer tensor"):
         F.interpolate(v, topo, z, torch.tensor([0.0, 1.0]), bary)

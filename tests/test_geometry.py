@@ -28,14 +28,15 @@ def test_single_right_triangle_by_hand():
     v = torch.tensor([[0.0, 0, 0], [2.0, 0, 0], [0, 1.0, 0]], dtype=torch.float64)
     f = torch.tensor([[0, 1, 2]])
     g = face_geometry(v, f)
-    torch.testing.assert_close(g.lengths[0], torch.tensor([5 ** 0.5, 1.0, 2.0], dtype=v.dtype))
+    torch.testing.assert_close(g.lengths[0], torch.tensor([5**0.5, 1.0, 2.0], dtype=v.dtype))
     torch.testing.assert_close(g.area, torch.tensor([1.0], dtype=v.dtype))
     torch.testing.assert_close(g.angles[0, 0], torch.tensor(math.pi / 2, dtype=v.dtype))
     torch.testing.assert_close(g.angles[0, 1], torch.tensor(math.atan(0.5), dtype=v.dtype))
     r = ev.transport_coefficients(v, f)[0]
     # edge opposite corner 0 runs 1 -> 2 (delta=+1), opposite corner 1 runs 2 -> 0 (delta=-1):
-    # frames X_0 = (-2, 1)/sqrt5 and X_1 = (0, 1) (from 0 to 2); X_0 = e^{i(pi/2 + alpha_1)}... in X_1's frame:
-    x0 = complex(-2, 1) / 5 ** 0.5
+    # frames X_0 = (-2, 1)/sqrt5 and X_1 = (0, 1) (from 0 to 2);
+    # X_0 = e^{i(pi/2 + alpha_1)}... in X_1's frame:
+    x0 = complex(-2, 1) / 5**0.5
     x1 = complex(0, 1)
     assert abs(complex(r[0, 1]) - x0 / x1) < 1e-14  # coefficient c in X_0 is c*x0/x1 in X_1
     assert torch.allclose(r.conj().transpose(0, 1), r)  # r_ba = conj(r_ab)
@@ -74,7 +75,7 @@ def test_gauss_bonnet_and_boundary_defects():
 def test_dihedral_angles_sign_and_value():
     v, f = ev.icosphere(0)
     beta = ev.dihedral_angles(v, f)
-    expected = math.pi - math.acos(-5 ** 0.5 / 3)  # exterior dihedral of the icosahedron
+    expected = math.pi - math.acos(-(5**0.5) / 3)  # exterior dihedral of the icosahedron
     torch.testing.assert_close(beta, torch.full_like(beta, expected))
     # flip the sphere inside out: every edge becomes concave
     beta_in = ev.dihedral_angles(v, f[:, [0, 2, 1]])

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_naive_reference import assert_close, torch_backend
 
 import naive_reference as ref
-from test_naive_reference import assert_close, torch_backend
 
 S2 = np.sqrt(2.0)
 S3 = np.sqrt(3.0)
@@ -195,8 +195,11 @@ def test_equilateral_triangle(bk):
     L1 = np.where(np.eye(3) > 0, 4 / S3, -(2 / S3) * X[None, :] / X[:, None])
     close(bk.connection_laplacian(v, f, n=1), L1, "L_c^(1)")
     close(bk.connection_laplacian(v, f, n=0), (6 * np.eye(3) - 2 * np.ones((3, 3))) / S3, "L_c^(0)")
-    close(bk.connection_laplacian(v, f, n=3),
-          np.where(np.eye(3) > 0, 4 / S3, -(2 / S3) * (X[None, :] / X[:, None]) ** 3), "L_c^(3)")
+    close(
+        bk.connection_laplacian(v, f, n=3),
+        np.where(np.eye(3) > 0, 4 / S3, -(2 / S3) * (X[None, :] / X[:, None]) ** 3),
+        "L_c^(3)",
+    )
     # cotan weight cot(pi/3)/2 = 1/(2 sqrt3) on every edge
     C = (3 * np.eye(3) - np.ones((3, 3))) / (2 * S3)
     close(bk.cotan_laplacian(v, f), C, "cotan")
@@ -229,8 +232,12 @@ SQUARE_L1 = np.diag([2, 8, 2, 2, 2]).astype(complex)
 # Face B: (e2, e1) with c = v0 (pi/4): -2, r(e1 -> e2) = X_e1/X_e2 = cis(-pi/4)
 #         (e1, e4) with c = v2 (pi/4): -2, r(e4 -> e1) = X_e4/X_e1 = -cis(-pi/4)  -> +2 cis(-pi/4)
 #         (e4, e2) with c = v3 (pi/2): 0
-for (_a, _b), _val in {(3, 1): -2 * cis(-PI / 4), (1, 0): -2 * cis(-PI / 4),
-                       (2, 1): -2 * cis(-PI / 4), (1, 4): 2 * cis(-PI / 4)}.items():
+for (_a, _b), _val in {
+    (3, 1): -2 * cis(-PI / 4),
+    (1, 0): -2 * cis(-PI / 4),
+    (2, 1): -2 * cis(-PI / 4),
+    (1, 4): 2 * cis(-PI / 4),
+}.items():
     SQUARE_L1[_a, _b] = _val
     SQUARE_L1[_b, _a] = np.conj(_val)
 

@@ -38,7 +38,13 @@ MESH_TABLE = {
     "bunny.obj": (3301, 6598, 2, 0),
 }
 # OBJ files with per-corner normals: trimesh returns three vertices per face for them
-SPLIT_BY_NORMALS = {"spot_low_resolution.obj", "spot.obj", "fish_low_resolution.obj", "skull_low_resolution.obj", "bunny.obj"}
+SPLIT_BY_NORMALS = {
+    "spot_low_resolution.obj",
+    "spot.obj",
+    "fish_low_resolution.obj",
+    "skull_low_resolution.obj",
+    "bunny.obj",
+}
 
 
 def shared_mesh(name: str) -> Path:
@@ -49,7 +55,9 @@ def shared_mesh(name: str) -> Path:
 
 def obj_positions(path: Path) -> np.ndarray:
     """The file's ``v`` records parsed by Python's float(), for bit-exact comparison."""
-    return np.array([line.split()[1:4] for line in path.read_text().splitlines() if line.startswith("v ")], dtype=float)
+    return np.array(
+        [line.split()[1:4] for line in path.read_text().splitlines() if line.startswith("v ")], dtype=float
+    )
 
 
 def stats(faces: torch.Tensor, num_vertices: int) -> dict:
@@ -76,7 +84,11 @@ def same_bits(a: torch.Tensor, b: torch.Tensor) -> bool:
     """Bitwise equality (distinguishes -0.0 from 0.0, and nan == nan)."""
     if a.is_complex():
         a, b = torch.view_as_real(a), torch.view_as_real(b)
-    return a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a.numpy().view(np.int64), b.numpy().view(np.int64))
+    return (
+        a.shape == b.shape
+        and a.dtype == b.dtype
+        and np.array_equal(a.numpy().view(np.int64), b.numpy().view(np.int64))
+    )
 
 
 @pytest.fixture
@@ -148,9 +160,17 @@ def test_report_counts_cleanup(tmp_path, caplog):
     r = mesh.report
     assert mesh.faces.tolist() == [[0, 1, 2], [1, 3, 2]]
     assert (r.merged_vertices, r.degenerate_faces, r.duplicate_faces) == (1, 1, 1)
-    assert (r.file_vertices, r.loaded_vertices, r.num_vertices) == (6, 5, 4)  # trimesh skips unused OBJ vertices
+    assert (r.file_vertices, r.loaded_vertices, r.num_vertices) == (
+        6,
+        5,
+        4,
+    )  # trimesh skips unused OBJ vertices
     text = str(r)
-    assert "merged 1 vertices" in text and "1 degenerate faces, 1 duplicate faces" in text and "dirty.obj" in text
+    assert (
+        "merged 1 vertices" in text
+        and "1 degenerate faces, 1 duplicate faces" in text
+        and "dirty.obj" in text
+    )
     assert "2 vertex records more" in text
     assert "dirty.obj" in caplog.text  # faces were dropped: logged as a warning
 
@@ -175,7 +195,9 @@ def test_polygons_are_triangulated_and_reported(tmp_path, ext):
     else:
         text = (
             "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
-            "element face 2\nproperty list uchar int vertex_indices\nend_header\n" + "\n".join(verts) + "\n4 0 1 2 3\n3 1 4 2\n"
+            "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+            + "\n".join(verts)
+            + "\n4 0 1 2 3\n3 1 4 2\n"
         )
     r = load_mesh(write(tmp_path / f"quad.{ext}", text)).report
     assert r.triangulated and (r.file_faces, r.num_faces) == (2, 3)
@@ -184,7 +206,10 @@ def test_polygons_are_triangulated_and_reported(tmp_path, ext):
 
 def test_scene_of_several_geometries_is_concatenated(tmp_path):
     write(tmp_path / "two.mtl", "newmtl a\nKd 1 0 0\nnewmtl b\nKd 0 1 0\n")
-    path = write(tmp_path / "two.obj", "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\n")
+    path = write(
+        tmp_path / "two.obj",
+        "mtllib two.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl a\nf 1 2 3\nusemtl b\nf 1 3 4\n",
+    )
     mesh = load_mesh(path)
     assert mesh.report.geometries == 2 and "concatenated 2 geometries" in str(mesh.report)
     assert mesh.verts.shape == (4, 3) and mesh.faces.shape == (2, 3)
@@ -202,7 +227,12 @@ def test_scene_of_several_geometries_is_concatenated(tmp_path):
         ("empty.obj", "", "no triangle faces found"),
         ("junk.obj", "hello world\n", "no triangle faces found"),
         ("points.obj", "v 0 0 0\nv 1 0 0\n", "point cloud (2 points"),
-        ("points.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n", "point cloud"),
+        (
+            "points.ply",
+            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+            "property float z\nend_header\n0 0 0\n",
+            "point cloud",
+        ),
         ("junk.ply", "garbage\n", "PLY parser failed"),
         ("junk.off", "garbage\n", "OFF parser failed"),
         ("junk.stl", "garbage\n", "not an STL file"),
@@ -312,7 +342,9 @@ def test_field_round_trip_default_mesh(tmp_path):
     back = load_field(tmp_path / "spot.npz")
     assert E == 2481 and same_bits(back.z, z) and torch.equal(back.extra["singularities"], singular)
     with zipfile.ZipFile(tmp_path / "spot.npz") as zf:  # plain .npy members, nothing pickled
-        assert sorted(zf.namelist()) == sorted(f"{k}.npy" for k in ["verts", "faces", "edges", "z", "n", "version", "singularities"])
+        assert sorted(zf.namelist()) == sorted(
+            f"{k}.npy" for k in ["verts", "faces", "edges", "z", "n", "version", "singularities"]
+        )
 
 
 def test_field_txt_format_is_readable_and_order_free(tmp_path, small_mesh):
@@ -350,7 +382,14 @@ def test_field_save_errors(tmp_path, small_mesh):
 def test_field_npz_mismatch_raises(tmp_path, small_mesh):
     verts, faces = small_mesh
     z = special_field(12, None)
-    good = dict(verts=verts.numpy(), faces=faces.numpy(), edges=edges_from_faces(faces), z=z.numpy(), n=np.int64(1), version=np.int64(1))
+    good = dict(
+        verts=verts.numpy(),
+        faces=faces.numpy(),
+        edges=edges_from_faces(faces),
+        z=z.numpy(),
+        n=np.int64(1),
+        version=np.int64(1),
+    )
 
     def check(message, **changes):
         np.savez(tmp_path / "bad.npz", **{**good, **changes})

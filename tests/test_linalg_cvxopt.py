@@ -10,11 +10,12 @@ import pytest
 import scipy.sparse
 import scipy.sparse.linalg as sla
 import torch
-from conftest import record_instances
 from test_linalg_problems import grid_laplacian
 
 from torch_edgevf.linalg import SparseSolver, eigsh, solve
 from torch_edgevf.linalg._utils import as_sparse
+
+from conftest import record_instances
 
 
 @pytest.fixture
@@ -23,7 +24,9 @@ def fm(monkeypatch):
     from torch_edgevf.linalg import factor as factor_module
 
     if factor_module.cholmod_module() is not None:
-        pytest.skip("scikit-sparse is loadable: the cvxopt tests run in a process without it (EDGEVF_HIDE_CHOLMOD=1)")
+        pytest.skip(
+            "scikit-sparse is loadable: the cvxopt tests run in a process without it (EDGEVF_HIDE_CHOLMOD=1)"
+        )
     if factor_module.cvxopt_cholmod_module() is None:
         pytest.skip("cvxopt is not installed")
     return factor_module
@@ -41,8 +44,11 @@ def test_factor_solves_like_spsolve(fm, dtype, many_solves):
     f = fm.factorize(K, "auto", hermitian=True, many_solves=many_solves)
     assert f.backend == "cholmod-cvxopt"
     rng = np.random.default_rng(0)
-    for b in (rng.standard_normal(56), rng.standard_normal((56, 3)),
-              rng.standard_normal((56, 2)) + 1j * rng.standard_normal((56, 2))):
+    for b in (
+        rng.standard_normal(56),
+        rng.standard_normal((56, 3)),
+        rng.standard_normal((56, 2)) + 1j * rng.standard_normal((56, 2)),
+    ):
         ref = sla.spsolve(K.astype(np.result_type(K.dtype, b.dtype)), b)
         np.testing.assert_allclose(f.solve(b), ref.reshape(b.shape), rtol=1e-11, atol=1e-12)
         np.testing.assert_allclose(f.solve(b, adjoint=True), f.solve(b), rtol=0, atol=0)

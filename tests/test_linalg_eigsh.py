@@ -5,10 +5,11 @@ import pytest
 import scipy.linalg
 import scipy.sparse
 import torch
-from conftest import record_instances
 from test_linalg_problems import grid_laplacian
 
 from torch_edgevf.linalg import eigsh
+
+from conftest import record_instances
 
 DTYPES = [torch.float64, torch.complex128]
 METHODS = ["dense", "lanczos"]
@@ -42,8 +43,12 @@ def test_phase_convention(dtype):
     _, X = eigsh(p.A, p.m, 4, method="lanczos")
     pivot = X[X.abs().argmax(0), torch.arange(4)]
     assert torch.all(pivot.real > 0)
-    torch.testing.assert_close(pivot.imag if dtype.is_complex else torch.zeros(4, dtype=dtype),
-                               torch.zeros(4, dtype=torch.float64), atol=1e-14, rtol=0)
+    torch.testing.assert_close(
+        pivot.imag if dtype.is_complex else torch.zeros(4, dtype=dtype),
+        torch.zeros(4, dtype=torch.float64),
+        atol=1e-14,
+        rtol=0,
+    )
 
 
 def test_singular_laplacian_default_shift():
@@ -132,8 +137,9 @@ def test_gradcheck_sparse_mass():
         lam, X = eigsh(p.hermitian(params), mass(off, diag), 2, method="lanczos")
         return lam, X.abs() ** 2
 
-    assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), off.requires_grad_(),
-                                        p.m.clone().requires_grad_()))
+    assert torch.autograd.gradcheck(
+        f, (p.params.clone().requires_grad_(), off.requires_grad_(), p.m.clone().requires_grad_())
+    )
 
 
 def _degenerate_problem():
@@ -148,8 +154,9 @@ def test_degenerate_projector_loss_is_supported():
     A, m = _degenerate_problem()
     values = A.coalesce().values().clone().requires_grad_()
     with torch.autograd.detect_anomaly():
-        X = eigsh(torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2,
-                  method="lanczos").vectors
+        X = eigsh(
+            torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2, method="lanczos"
+        ).vectors
         (X @ X.mT).diagonal().pow(2).sum().backward()
     assert torch.isfinite(values.grad).all()
 
@@ -157,7 +164,9 @@ def test_degenerate_projector_loss_is_supported():
 def test_degenerate_basis_dependent_loss_raises():
     A, m = _degenerate_problem()
     values = A.coalesce().values().clone().requires_grad_()
-    X = eigsh(torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2, method="lanczos").vectors
+    X = eigsh(
+        torch.sparse_coo_tensor(A.coalesce().indices(), values, A.shape), m, 2, method="lanczos"
+    ).vectors
     with pytest.raises(ValueError, match="degenerate eigenspace"):
         X[:, 0].pow(4).sum().backward()
 
@@ -339,8 +348,17 @@ def test_lanczos_deferred_pass_survives_invariant_subspaces(monkeypatch):
             spectrum = np.concatenate([np.repeat(values[:-1], mult), np.full(n - mult * (distinct - 1), 1.0)])
             T, op = _hermitian_operator(n, spectrum, seed=2)
             k = mult * (distinct - 1)
-            theta, Y, _ = lanczos._lanczos(op, lanczos._Inner(np.complex128), n, k, block=2, ncv=40, tol=1e-12,
-                                         maxiter=100, v0=np.random.default_rng(1).standard_normal(n))
+            theta, Y, _ = lanczos._lanczos(
+                op,
+                lanczos._Inner(np.complex128),
+                n,
+                k,
+                block=2,
+                ncv=40,
+                tol=1e-12,
+                maxiter=100,
+                v0=np.random.default_rng(1).standard_normal(n),
+            )
             np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
             np.testing.assert_allclose(Y.conj().T @ Y, np.eye(k), atol=1e-13)
     assert sum(fallbacks) >= 2
@@ -364,8 +382,17 @@ def _counted_lanczos(monkeypatch, T, op, k, every_step):
     if every_step:
         monkeypatch.setattr(lanczos._TestSchedule, "due", lambda self, cols, n_op, b: True)
     n = T.shape[0]
-    theta, Y, n_op = lanczos._lanczos(op, lanczos._Inner(np.complex128), n, k, block=2, ncv=3 * k, tol=1e-12,
-                                    maxiter=100, v0=np.random.default_rng(1).standard_normal(n))
+    theta, Y, n_op = lanczos._lanczos(
+        op,
+        lanczos._Inner(np.complex128),
+        n,
+        k,
+        block=2,
+        ncv=3 * k,
+        tol=1e-12,
+        maxiter=100,
+        v0=np.random.default_rng(1).standard_normal(n),
+    )
     monkeypatch.undo()
     return theta, Y, n_op, tests
 
@@ -384,7 +411,9 @@ def test_lanczos_spaces_its_tests_when_they_cost_more_than_steps(monkeypatch):
     after every step.  Spaced, they are at most a quarter as many, for at most 15% more solves
     and the same pairs, bit for bit reproducible.  A shift-invert-like spectrum (1 / i)."""
     k = 60
-    spectrum, T, op, (theta0, _, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(monkeypatch, 600, k)
+    spectrum, T, op, (theta0, _, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(
+        monkeypatch, 600, k
+    )
     np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
     np.testing.assert_allclose(theta0, spectrum[:k], rtol=1e-11)
     np.testing.assert_allclose(Y.conj().T @ Y, np.eye(k), atol=1e-13)
@@ -402,7 +431,9 @@ def test_lanczos_tests_cheaply_where_tests_are_cheap(monkeypatch):
     spaced by the predicted convergence only (at most 4 steps apart), which leaves the
     solve count and the pairs as with a test after every step."""
     k = 6
-    spectrum, _, _, (theta0, Y0, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(monkeypatch, 1500, k)
+    spectrum, _, _, (theta0, Y0, n_op0, tests0), (theta, Y, n_op, tests) = _both_schedules(
+        monkeypatch, 1500, k
+    )
     np.testing.assert_allclose(theta, spectrum[:k], rtol=1e-11)
     assert n_op == n_op0
     assert np.array_equal(theta, theta0) and np.array_equal(Y, Y0)
@@ -439,6 +470,7 @@ def test_test_schedule_never_skips_past_half_the_predicted_steps():
     assert not s.due(cols=40, n_op=25, b=2) and s.due(cols=40, n_op=26, b=2)
     s.record(np.array([1e4]), n_op=26, b=2)  # 1.5 decades per step: 2.7 steps left, test in 1
     assert s.due(cols=40, n_op=28, b=2)
+
 
 # --------------------------------------------------------------- adaptive block size
 
@@ -524,7 +556,9 @@ def no_cholmod(monkeypatch):
     from torch_edgevf.linalg import factor as factor_module
 
     if factor_module.cholmod_module() is not None:
-        pytest.skip("scikit-sparse is loadable: cholespy tests run in a process without it (EDGEVF_HIDE_CHOLMOD=1)")
+        pytest.skip(
+            "scikit-sparse is loadable: cholespy tests run in a process without it (EDGEVF_HIDE_CHOLMOD=1)"
+        )
     pytest.importorskip("cholespy")
 
     monkeypatch.setattr(factor_module, "cholmod_module", lambda: None)
@@ -546,9 +580,14 @@ def test_cholespy_factor_for_many_solves_of_real_spd_only(no_cholmod):
     f = fm.factorize(K, "auto", hermitian=True, many_solves=True)
     assert f.backend == "cholespy"
     rng = np.random.default_rng(0)
-    for b in (rng.standard_normal(42), rng.standard_normal((42, 3)),
-              rng.standard_normal((42, 2)) + 1j * rng.standard_normal((42, 2))):
-        np.testing.assert_allclose(f.solve(b), sla.spsolve(K.tocsc().astype(b.dtype), b), rtol=1e-12, atol=1e-13)
+    for b in (
+        rng.standard_normal(42),
+        rng.standard_normal((42, 3)),
+        rng.standard_normal((42, 2)) + 1j * rng.standard_normal((42, 2)),
+    ):
+        np.testing.assert_allclose(
+            f.solve(b), sla.spsolve(K.tocsc().astype(b.dtype), b), rtol=1e-12, atol=1e-13
+        )
         np.testing.assert_allclose(f.solve(b, adjoint=True), f.solve(b), rtol=0, atol=0)
     # one-off solves keep SuperLU (cheaper factorization); complex matrices never use cholespy
     assert fm.factorize(K, "auto", hermitian=True).backend == "superlu-hermitian"
@@ -604,7 +643,7 @@ def test_gradcheck_eigsh_with_cholespy(cholespy_factors):
 
     def f(params, m):
         lam, X = eigsh(p.hermitian(params), m, 2, method="lanczos")
-        return lam, X ** 2, X
+        return lam, X**2, X
 
     assert torch.autograd.gradcheck(f, (p.params.clone().requires_grad_(), p.m.clone().requires_grad_()))
     assert cholespy_factors
@@ -629,7 +668,9 @@ def test_inner_products_narrow_and_wide_blocks_match_numpy(dtype):
         for cols in (1, 2, 3, 7):
             for b in (1, 2, 4):
                 V, W, C = rand(n, cols), rand(n, b), rand(cols, b)
-                np.testing.assert_allclose(inner.dot(V, W), V.conj().T @ (weight[:, None] * W), rtol=1e-13, atol=1e-12)
+                np.testing.assert_allclose(
+                    inner.dot(V, W), V.conj().T @ (weight[:, None] * W), rtol=1e-13, atol=1e-12
+                )
                 expected = W - V @ C
                 out = inner.subtract(W, V, C)
                 np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-12)
@@ -682,7 +723,9 @@ def test_scaled_shifted_matrix(dtype, full_diagonal):
     K = lanczos._scaled_shifted(A, m, 1 / np.sqrt(m), sigma)
     assert K.format == "csc"
     D = np.diag(1 / np.sqrt(m))
-    np.testing.assert_allclose(K.toarray(), D @ (A.toarray() - sigma * np.diag(m)) @ D, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(
+        K.toarray(), D @ (A.toarray() - sigma * np.diag(m)) @ D, rtol=1e-14, atol=1e-14
+    )
 
 
 def test_to_scipy_is_the_coalesced_matrix():

@@ -13,8 +13,15 @@ DTYPES = [torch.float64, torch.complex128]
 def sparse_mass(m: torch.Tensor) -> torch.Tensor:
     """Tridiagonal SPD mass matrix with diagonal ``m``."""
     n = m.numel()
-    return (torch.diag(m) + 0.1 * torch.diag(torch.ones(n - 1, dtype=m.dtype), 1)
-            + 0.1 * torch.diag(torch.ones(n - 1, dtype=m.dtype), -1)).to_sparse().coalesce()
+    return (
+        (
+            torch.diag(m)
+            + 0.1 * torch.diag(torch.ones(n - 1, dtype=m.dtype), 1)
+            + 0.1 * torch.diag(torch.ones(n - 1, dtype=m.dtype), -1)
+        )
+        .to_sparse()
+        .coalesce()
+    )
 
 
 def dense_flow(A, M, z0, t):
@@ -74,8 +81,9 @@ def test_gradcheck_large_norm_transport():
 
     y = f(A.values(), z0, t)
     torch.testing.assert_close(y.norm(), z0.norm())  # unitary flow
-    assert torch.autograd.gradcheck(f, (A.values().clone().requires_grad_(), z0.requires_grad_(),
-                                        t.requires_grad_()), fast_mode=True)
+    assert torch.autograd.gradcheck(
+        f, (A.values().clone().requires_grad_(), z0.requires_grad_(), t.requires_grad_()), fast_mode=True
+    )
 
 
 def test_real_matrix_complex_initial_value():
@@ -104,8 +112,12 @@ def test_gradcheck_implicit_euler(dtype):
     def f(params, m, z0, t):
         return implicit_euler(p.hermitian(params), m, z0, t, steps=3)
 
-    inputs = (p.params.clone().requires_grad_(), p.m.clone().requires_grad_(), z0.requires_grad_(),
-              t.requires_grad_())
+    inputs = (
+        p.params.clone().requires_grad_(),
+        p.m.clone().requires_grad_(),
+        z0.requires_grad_(),
+        t.requires_grad_(),
+    )
     assert torch.autograd.gradcheck(f, inputs)
 
 

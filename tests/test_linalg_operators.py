@@ -32,8 +32,10 @@ def test_eigenvalue_gradient_wrt_vertices_matches_finite_differences(which):
     for _ in range(3):
         direction = torch.randn(verts.shape, generator=g, dtype=verts.dtype)
         h = 1e-5
-        fd = (smallest_eigenvalue(verts + h * direction, faces, which)
-              - smallest_eigenvalue(verts - h * direction, faces, which)) / (2 * h)
+        fd = (
+            smallest_eigenvalue(verts + h * direction, faces, which)
+            - smallest_eigenvalue(verts - h * direction, faces, which)
+        ) / (2 * h)
         np.testing.assert_allclose(float((grad * direction).sum()), float(fd), rtol=1e-5, atol=1e-8)
 
 

@@ -26,7 +26,7 @@ class Problem:
     def hermitian(self, params=None) -> torch.Tensor:
         """The Hermitian sparse matrix with these off-diagonal/diagonal parameters."""
         params = self.params if params is None else params
-        off, d = params[: self.i.numel()], params[self.i.numel():]
+        off, d = params[: self.i.numel()], params[self.i.numel() :]
         if off.is_complex():
             d = d.real.to(off.dtype)
         ar = torch.arange(self.n)

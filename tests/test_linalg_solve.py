@@ -15,8 +15,12 @@ CASES = {
     "real_general": lambda: random_general(9, torch.float64),
     "complex_general": lambda: random_general(9, torch.complex128),
 }
-EXPECTED_BACKEND = {"real_spd": "cholesky", "complex_hermitian": "cholesky",
-                    "real_general": "superlu", "complex_general": "superlu"}
+EXPECTED_BACKEND = {
+    "real_spd": "cholesky",
+    "complex_hermitian": "cholesky",
+    "real_general": "superlu",
+    "complex_general": "superlu",
+}
 
 
 @pytest.fixture(params=["cholmod", "pip-only"])
@@ -41,8 +45,9 @@ def test_solve_matches_dense(case, cols, backend):
     x = solver.solve(b)
     ref = torch.linalg.solve(A.to_dense(), b)
     torch.testing.assert_close(x, ref, rtol=1e-10, atol=1e-12)
-    torch.testing.assert_close(solver.solve_adjoint(b), torch.linalg.solve(A.to_dense().mH, b),
-                               rtol=1e-10, atol=1e-12)
+    torch.testing.assert_close(
+        solver.solve_adjoint(b), torch.linalg.solve(A.to_dense().mH, b), rtol=1e-10, atol=1e-12
+    )
     if EXPECTED_BACKEND[case] == "cholesky":
         assert solver.backend == ("cholmod" if backend == "cholmod" else "superlu-hermitian")
     else:
@@ -157,8 +162,12 @@ def test_solve_constrained(dtype):
     def f(params, b, cv, d):
         return solve_constrained(p.hermitian(params), b, torch.sparse_coo_tensor(C.indices(), cv, C.shape), d)
 
-    inputs = (p.params.clone().requires_grad_(), b.requires_grad_(),
-              C.values().clone().requires_grad_(), d.requires_grad_())
+    inputs = (
+        p.params.clone().requires_grad_(),
+        b.requires_grad_(),
+        C.values().clone().requires_grad_(),
+        d.requires_grad_(),
+    )
     assert torch.autograd.gradcheck(f, inputs)
 
 

@@ -29,7 +29,9 @@ def test_smoothness_is_rayleigh_quotient(small):
     out = losses.smoothness_loss(v, topo, z, n=2, reduction="none")
     torch.testing.assert_close(out, torch.stack(ref))
     torch.testing.assert_close(losses.smoothness_loss(v, topo, z, n=2), torch.stack(ref).mean())
-    torch.testing.assert_close(losses.smoothness_loss(v, topo, 3j * z, n=2, reduction="sum"), torch.stack(ref).sum())
+    torch.testing.assert_close(
+        losses.smoothness_loss(v, topo, 3j * z, n=2, reduction="sum"), torch.stack(ref).sum()
+    )
     # the smoothest field attains the smallest eigenvalue
     lam, X = eigsh(ev.connection_laplacian(v, topo, 1), m, k=1)
     torch.testing.assert_close(losses.smoothness_loss(v, topo, X[:, 0]), lam[0])
@@ -48,7 +50,9 @@ def test_alignment(small):
         assert float(losses.alignment_loss(v, topo, rep, rot, n=4)) == pytest.approx(0.0, abs=1e-12)
     m = ev.mass_matrix(v, topo).values()
     c = 0
-    ref = 1 - (m * (w[:, c].conj() * z[:, c])).sum().real / torch.sqrt((m * w[:, c].abs() ** 2).sum() * (m * z[:, c].abs() ** 2).sum())
+    ref = 1 - (m * (w[:, c].conj() * z[:, c])).sum().real / torch.sqrt(
+        (m * w[:, c].abs() ** 2).sum() * (m * z[:, c].abs() ** 2).sum()
+    )
     torch.testing.assert_close(losses.alignment_loss(v, topo, z, w, reduction="none")[c], ref)
     # guide broadcast over the columns
     out = losses.alignment_loss(v, topo, z, w[:, 0], reduction="none")
@@ -63,12 +67,15 @@ def test_curl_div_match_energy_matrices(small):
         ref = torch.einsum("ic,ij,jc->c", x, E, x)
         torch.testing.assert_close(fn(v, topo, z, reduction="none"), ref)
         m = ev.mass_matrix(v, topo).values()
-        torch.testing.assert_close(fn(v, topo, z, normalize=True, reduction="none"),
-                                   ref / (m[:, None] * z.abs() ** 2).sum(0))
+        torch.testing.assert_close(
+            fn(v, topo, z, normalize=True, reduction="none"), ref / (m[:, None] * z.abs() ** 2).sum(0)
+        )
     # a gradient field is curl free
     f = torch.randn(v.shape[0], dtype=torch.float64)
-    zg = torch.linalg.solve(torch.diag(ev.mass_matrix(v, topo).values()).to(torch.complex128),
-                            ev.gradient(v, topo).to_dense() @ f.to(torch.complex128))
+    zg = torch.linalg.solve(
+        torch.diag(ev.mass_matrix(v, topo).values()).to(torch.complex128),
+        ev.gradient(v, topo).to_dense() @ f.to(torch.complex128),
+    )
     assert float(losses.curl_loss(v, topo, zg)) < 1e-20
 
 
@@ -81,7 +88,9 @@ def test_losses_invariant_to_rigid_motion(small):
     for fn in (losses.smoothness_loss, losses.curl_loss, losses.div_loss):
         torch.testing.assert_close(fn(v2, topo, z), fn(v, topo, z))
     torch.testing.assert_close(losses.alignment_loss(v2, topo, z, w), losses.alignment_loss(v, topo, z, w))
-    torch.testing.assert_close(losses.laplace_beltrami_spectrum(v2, topo, 5), losses.laplace_beltrami_spectrum(v, topo, 5))
+    torch.testing.assert_close(
+        losses.laplace_beltrami_spectrum(v2, topo, 5), losses.laplace_beltrami_spectrum(v, topo, 5)
+    )
 
 
 def test_gradcheck_wrt_verts_and_field(small):
@@ -104,21 +113,31 @@ def test_spectral_loss_gradcheck_and_value(small):
     target = losses.laplace_beltrami_spectrum(v, topo, 6) * 1.1
     vv = v.clone().requires_grad_()
     assert torch.autograd.gradcheck(lambda x: losses.spectral_loss(x, topo, target), (vv,))
-    assert torch.autograd.gradcheck(lambda x: losses.laplace_beltrami_spectrum(x, topo, 4, lumped=True)[1:], (vv,))
+    assert torch.autograd.gradcheck(
+        lambda x: losses.laplace_beltrami_spectrum(x, topo, 4, lumped=True)[1:], (vv,)
+    )
     # value: relative errors of 1/1.1 - 1
     assert float(losses.spectral_loss(v, topo, target)) == pytest.approx((1 / 1.1 - 1) ** 2, rel=1e-10)
     # against a dense generalized eigensolver
     import scipy.linalg
-    lam = scipy.linalg.eigh(ev.laplace_beltrami(v, topo).to_dense().numpy(),
-                            ev.vertex_mass(v, topo).to_dense().numpy(), eigvals_only=True)[:6]
+
+    lam = scipy.linalg.eigh(
+        ev.laplace_beltrami(v, topo).to_dense().numpy(),
+        ev.vertex_mass(v, topo).to_dense().numpy(),
+        eigvals_only=True,
+    )[:6]
     np.testing.assert_allclose(losses.laplace_beltrami_spectrum(v, topo, 6).numpy(), lam, atol=1e-10)
 
 
 def test_float32(small):
     v, topo, z, w = small
     v32, z32, w32 = v.float().requires_grad_(), z.to(torch.complex64).requires_grad_(), w.to(torch.complex64)
-    total = (losses.smoothness_loss(v32, topo, z32) + losses.alignment_loss(v32, topo, z32, w32)
-             + losses.curl_loss(v32, topo, z32, normalize=True) + losses.div_loss(v32, topo, z32, normalize=True))
+    total = (
+        losses.smoothness_loss(v32, topo, z32)
+        + losses.alignment_loss(v32, topo, z32, w32)
+        + losses.curl_loss(v32, topo, z32, normalize=True)
+        + losses.div_loss(v32, topo, z32, normalize=True)
+    )
     assert total.dtype == torch.float32
     total.backward()
     assert torch.isfinite(v32.grad).all() and torch.isfinite(torch.view_as_real(z32.grad)).all()

@@ -35,8 +35,12 @@ def test_module_matches_functions(mesh):
     torch.testing.assert_close(ops.edges, t.edges)
     torch.testing.assert_close(ops.edge_length, ev.edge_lengths(v, t))
     w = torch.randn(t.num_edges, dtype=torch.complex128)
-    torch.testing.assert_close(ops.covariant_derivative(w).to_dense(), ev.covariant_derivative(v, t, w).to_dense())
-    torch.testing.assert_close(ops.connection_laplacian_n(0).to_dense(), ev.connection_laplacian(v, t, 0).to_dense())
+    torch.testing.assert_close(
+        ops.covariant_derivative(w).to_dense(), ev.covariant_derivative(v, t, w).to_dense()
+    )
+    torch.testing.assert_close(
+        ops.connection_laplacian_n(0).to_dense(), ev.connection_laplacian(v, t, 0).to_dense()
+    )
 
 
 def test_float32_conversion_keeps_imaginary_parts(mesh):

@@ -183,8 +183,11 @@ def test_transport_matches_reference(mesh):
     verts, faces = mesh
     r = ref.transport(verts, faces)
     assert_close(torch_backend.transport(verts, faces), r, what="transport")
-    assert_close(torch_backend.transport(verts, faces), ref.transport_from_frames(verts, faces),
-                 what="transport vs 3D frames")
+    assert_close(
+        torch_backend.transport(verts, faces),
+        ref.transport_from_frames(verts, faces),
+        what="transport vs 3D frames",
+    )
     v, topo = TorchBackend._t(verts, faces)
     for n in (0, 2, 3):
         assert_close(_dense(tgeo.transport_coefficients(v, topo, n=n)), r**n, what=f"transport n={n}")
@@ -261,8 +264,11 @@ def test_laplace_beltrami_matches_reference(mesh):
 @pytest.mark.parametrize("lumped", [False, True])
 def test_vertex_mass_matches_reference(mesh, lumped):
     verts, faces = mesh
-    assert_close(torch_backend.vertex_mass(verts, faces, lumped=lumped),
-                 ref.vertex_mass(verts, faces, lumped=lumped), what=f"M_v lumped={lumped}")
+    assert_close(
+        torch_backend.vertex_mass(verts, faces, lumped=lumped),
+        ref.vertex_mass(verts, faces, lumped=lumped),
+        what=f"M_v lumped={lumped}",
+    )
 
 
 def test_vertex_div_curl_matches_reference(mesh):
@@ -281,8 +287,11 @@ def test_covariant_derivative_matches_reference(mesh):
     rng = np.random.default_rng(3)
     ne = len(ref.edges(faces))
     w = rng.normal(size=ne) + 1j * rng.normal(size=ne)
-    assert_close(torch_backend.covariant_derivative(verts, faces, w),
-                 ref.covariant_derivative(verts, faces, w), what="D_w")
+    assert_close(
+        torch_backend.covariant_derivative(verts, faces, w),
+        ref.covariant_derivative(verts, faces, w),
+        what="D_w",
+    )
     # real w is taken as having zero imaginary part
     v, topo = TorchBackend._t(verts, faces)
     D_real = _dense(tops.covariant_derivative(v, topo, torch.as_tensor(w.real)))
@@ -309,8 +318,9 @@ def test_edge_operators_module_matches_reference(mesh, n):
     assert_close(_dense(ops.curl_div), ref.curl_div_K(verts, faces), what="module K")
     assert_close(_dense(ops.laplace_beltrami), ref.laplace_beltrami(verts, faces), what="module LB")
     assert_close(_dense(ops.vertex_mass), ref.vertex_mass(verts, faces), what="module M_v")
-    assert_close(_dense(ops.lumped_vertex_mass), ref.vertex_mass(verts, faces, lumped=True),
-                 what="module lumped M_v")
+    assert_close(
+        _dense(ops.lumped_vertex_mass), ref.vertex_mass(verts, faces, lumped=True), what="module lumped M_v"
+    )
     assert_close(_dense(ops.face_area), ref.face_areas(verts, faces), what="module areas")
     assert_close(_dense(ops.edge_length), ref.edge_lengths(verts, faces), what="module lengths")
     assert_close(_dense(ops.cotan_laplacian()), ref.cotan_laplacian(verts, faces), what="module cotan")
@@ -328,11 +338,15 @@ def test_edge_operators_update_matches_reference():
     assert_close(_dense(ops.gradient), ref.gradient(verts1, faces), what="G")
     assert_close(_dense(ops.laplace_beltrami), ref.laplace_beltrami(verts1, faces), what="LB")
     w = np.exp(1j * np.arange(ops.num_edges))
-    assert_close(_dense(ops.covariant_derivative(torch.as_tensor(w))),
-                 ref.covariant_derivative(verts1, faces, w), what="D_w")
+    assert_close(
+        _dense(ops.covariant_derivative(torch.as_tensor(w))),
+        ref.covariant_derivative(verts1, faces, w),
+        what="D_w",
+    )
 
 
 # --------------------------------------------------------------------------- derivatives
+
 
 def _phases(ne):
     return np.exp(1j * np.arange(ne))

@@ -35,7 +35,9 @@ def _z(n, c, seed=0, dtype=torch.complex128):
 
 def _phases(n, seed=1):
     g = torch.Generator().manual_seed(seed)
-    return torch.polar(torch.ones(n, dtype=torch.float64), 2 * np.pi * torch.rand(n, generator=g, dtype=torch.float64))
+    return torch.polar(
+        torch.ones(n, dtype=torch.float64), 2 * np.pi * torch.rand(n, generator=g, dtype=torch.float64)
+    )
 
 
 # --------------------------------------------------------------------------- diffusion
@@ -58,8 +60,10 @@ def test_spectral_diffusion_truncated_is_projection_at_zero(mesh):
     torch.testing.assert_close(again, out)  # a projector
     # and independent of the phase of each eigenvector
     rotated = phi * _phases(k)[None, :]
-    torch.testing.assert_close(enn.spectral_diffusion(z, mesh["evals"][:k], rotated, m, torch.ones(2, dtype=torch.float64)),
-                               enn.spectral_diffusion(z, mesh["evals"][:k], phi, m, torch.ones(2, dtype=torch.float64)))
+    torch.testing.assert_close(
+        enn.spectral_diffusion(z, mesh["evals"][:k], rotated, m, torch.ones(2, dtype=torch.float64)),
+        enn.spectral_diffusion(z, mesh["evals"][:k], phi, m, torch.ones(2, dtype=torch.float64)),
+    )
 
 
 def test_spectral_diffusion_batch_matches_single(mesh):
@@ -69,8 +73,14 @@ def test_spectral_diffusion_batch_matches_single(mesh):
     ev_, phi, m = mesh["evals"][:k], mesh["evecs"][:, :k], mesh["m"]
     single = [enn.spectral_diffusion(z, ev_, phi, m, t) for z in (z1, z2)]
     ne = z1.shape[0]
-    batched = enn.spectral_diffusion(torch.cat([z1, z2]), torch.stack([ev_, ev_]), torch.cat([phi, phi]),
-                                     torch.cat([m, m]), t, offsets=[0, ne, 2 * ne])
+    batched = enn.spectral_diffusion(
+        torch.cat([z1, z2]),
+        torch.stack([ev_, ev_]),
+        torch.cat([phi, phi]),
+        torch.cat([m, m]),
+        t,
+        offsets=[0, ne, 2 * ne],
+    )
     torch.testing.assert_close(batched, torch.cat(single))
 
 
@@ -99,9 +109,15 @@ def test_learned_diffusion_module_wraps_functions(mesh):
         assert bool((layer.times > 0).all())
         t = layer.times
         if method == "spectral":
-            out = layer(z, mesh["m"].float(), evals=mesh["evals"][:k].float(), evecs=mesh["evecs"][:, :k].to(torch.complex64))
-            ref = enn.spectral_diffusion(z, mesh["evals"][:k].float(), mesh["evecs"][:, :k].to(torch.complex64),
-                                         mesh["m"].float(), t)
+            out = layer(
+                z,
+                mesh["m"].float(),
+                evals=mesh["evals"][:k].float(),
+                evecs=mesh["evecs"][:, :k].to(torch.complex64),
+            )
+            ref = enn.spectral_diffusion(
+                z, mesh["evals"][:k].float(), mesh["evecs"][:, :k].to(torch.complex64), mesh["m"].float(), t
+            )
         else:
             L = mesh["L"].to(torch.complex64)
             out = layer(z, mesh["m"].float(), L=L)
@@ -209,8 +225,11 @@ def test_pooling(mesh):
     w = mesh["m"]
     x = torch.randn(topo.num_edges, 3, dtype=torch.float64)
     const = torch.ones(topo.num_edges, 2, dtype=torch.float64)
-    for out in (enn.pool_edges_to_vertices(const, topo.edges, topo.num_vertices, w),
-                enn.pool_edges_to_faces(const, topo.face_edges, w), enn.pool_global(const, w)):
+    for out in (
+        enn.pool_edges_to_vertices(const, topo.edges, topo.num_vertices, w),
+        enn.pool_edges_to_faces(const, topo.face_edges, w),
+        enn.pool_global(const, w),
+    ):
         torch.testing.assert_close(out, torch.ones_like(out))
     pv = enn.pool_edges_to_vertices(x, topo.edges, topo.num_vertices, w)
     vtx = 5
@@ -221,7 +240,9 @@ def test_pooling(mesh):
     torch.testing.assert_close(pf[7], (w[fe, None] * x[fe]).sum(0) / w[fe].sum())
     torch.testing.assert_close(enn.pool_global(x, w), ((w[:, None] * x).sum(0) / w.sum())[None])
     # modules wrap functions
-    torch.testing.assert_close(enn.EdgePooling("vertex")(x, w, edges=topo.edges, num_vertices=topo.num_vertices), pv)
+    torch.testing.assert_close(
+        enn.EdgePooling("vertex")(x, w, edges=topo.edges, num_vertices=topo.num_vertices), pv
+    )
     torch.testing.assert_close(enn.EdgePooling("face")(x, w, face_edges=topo.face_edges), pf)
     torch.testing.assert_close(enn.EdgePooling("global")(x, w), enn.pool_global(x, w))
 
@@ -327,8 +348,9 @@ def test_networks_batch_equals_single_and_float32(moved_pair):
         single = torch.cat([net(data.collate_meshes([s])) for s in (s1, s2)])
         torch.testing.assert_close(both, single)
         net32 = model(8, 3, width=8, num_blocks=1)
-        b32 = data.collate_meshes([data.MeshSample(s.operators.to(torch.float32), s.features.float(), 1)
-                                   for s in (s1, s2)])
+        b32 = data.collate_meshes(
+            [data.MeshSample(s.operators.to(torch.float32), s.features.float(), 1) for s in (s1, s2)]
+        )
         out = net32(b32)
         assert out.dtype == torch.float32 and out.shape == (2, 3)
         loss = torch.nn.functional.cross_entropy(out, b32.labels)
@@ -349,8 +371,9 @@ def test_network_errors(moved_pair):
     batch = data.MeshBatch.from_operators(s1.operators, s1.features)
     with pytest.raises(ValueError, match="batch.features"):
         models.EdgeFieldNet(3, 2).double()(batch)
-    no_grad = data.MeshBatch.from_operators(data.compute_operators(s1.operators.verts, s1.operators.faces, k_edge=4,
-                                                                   k_vertex=4), s1.features)
+    no_grad = data.MeshBatch.from_operators(
+        data.compute_operators(s1.operators.verts, s1.operators.faces, k_edge=4, k_vertex=4), s1.features
+    )
     with pytest.raises(ValueError, match="vertex_gradient"):
         models.DiffusionNetBaseline(8, 2).double()(no_grad)
     with pytest.raises(ValueError, match="width"):

@@ -115,18 +115,28 @@ def test_flat_linear_fields_are_exact():
     v, f = perturbed_grid(5, 0.1, seed=4, flat=True)
     t = ev.Topology(f)
     g = torch.Generator().manual_seed(5)
-    B, c = torch.randn(2, 2, dtype=torch.float64, generator=g), torch.randn(2, dtype=torch.float64, generator=g)
+    B, c = (
+        torch.randn(2, 2, dtype=torch.float64, generator=g),
+        torch.randn(2, dtype=torch.float64, generator=g),
+    )
     z = _linear_field(v, t, B, c)
     area = ev.face_areas(v, f).sum()
     # Dirichlet energy = area * |B|_F^2
     L = ev.connection_laplacian(v, t, 1)
-    torch.testing.assert_close(torch.vdot(z, L @ z).real, area * (B ** 2).sum())
+    torch.testing.assert_close(torch.vdot(z, L @ z).real, area * (B**2).sum())
     # mass: z^* M z = int |psi|^2 is exact for linear psi too (midpoint rule is exact for quadratics)
     # curl and div are constant: curl = B10 - B01, div = B00 + B11
-    torch.testing.assert_close(ev.face_curl(v, t, z), torch.full((t.num_faces,), float(B[1, 0] - B[0, 1]), dtype=v.dtype))
-    torch.testing.assert_close(ev.face_div(v, t, z), torch.full((t.num_faces,), float(B[0, 0] + B[1, 1]), dtype=v.dtype))
+    torch.testing.assert_close(
+        ev.face_curl(v, t, z), torch.full((t.num_faces,), float(B[1, 0] - B[0, 1]), dtype=v.dtype)
+    )
+    torch.testing.assert_close(
+        ev.face_div(v, t, z), torch.full((t.num_faces,), float(B[0, 0] + B[1, 1]), dtype=v.dtype)
+    )
     # covariant derivative along a linear w: nabla_w psi = B w(p), exactly, boundary included
-    B2, c2 = torch.randn(2, 2, dtype=torch.float64, generator=g), torch.randn(2, dtype=torch.float64, generator=g)
+    B2, c2 = (
+        torch.randn(2, 2, dtype=torch.float64, generator=g),
+        torch.randn(2, dtype=torch.float64, generator=g),
+    )
     w = _linear_field(v, t, B2, c2)
     e = t.edges
     mid = 0.5 * (v[e[:, 0], :2] + v[e[:, 1], :2])
@@ -150,7 +160,7 @@ def test_integral_property():
     mid-edge hat phi_i = 1 - 2 lambda_i; integrate with 2-point Gauss-Legendre (exact)."""
     v, f = perturbed_grid(2, 0.1, seed=6, flat=True)
     geom = ev.face_geometry(v, f)
-    s = np.array([0.5 - 0.5 / 3 ** 0.5, 0.5 + 0.5 / 3 ** 0.5])
+    s = np.array([0.5 - 0.5 / 3**0.5, 0.5 + 0.5 / 3**0.5])
     for fi in range(f.shape[0]):
         for i in range(3):
             for k in range(3):
@@ -174,8 +184,8 @@ def test_real_forms_and_curl_div_energies(open_mesh):
     np.testing.assert_allclose(x @ R @ x, torch.vdot(z, L @ z).real.item(), rtol=1e-12)
     area = ev.face_areas(v, f)
     curl, div = ev.face_curl(v, t, z), ev.face_div(v, t, z)
-    np.testing.assert_allclose(x @ dense(ev.curl_energy(v, t)) @ x, (area * curl ** 2).sum().item(), rtol=1e-12)
-    np.testing.assert_allclose(x @ dense(ev.div_energy(v, t)) @ x, (area * div ** 2).sum().item(), rtol=1e-12)
+    np.testing.assert_allclose(x @ dense(ev.curl_energy(v, t)) @ x, (area * curl**2).sum().item(), rtol=1e-12)
+    np.testing.assert_allclose(x @ dense(ev.div_energy(v, t)) @ x, (area * div**2).sum().item(), rtol=1e-12)
     K = dense(ev.curl_div_operator(v, t))
     np.testing.assert_allclose(K @ z.numpy(), (area * torch.complex(curl, -div)).numpy(), atol=1e-12)
 
@@ -192,7 +202,7 @@ def test_cotan_and_vertex_mass(closed_mesh):
     vg, fg = perturbed_grid(4, 0.1, seed=8, flat=True)
     a = np.array([0.3, -1.2])
     u = vg[:, :2].numpy() @ a
-    energy = ev.face_areas(vg, fg).sum().item() * (a ** 2).sum()
+    energy = ev.face_areas(vg, fg).sum().item() * (a**2).sum()
     assert abs(u @ dense(ev.cotan_laplacian(vg, fg)) @ u - energy) < 1e-12
     assert abs(u @ dense(ev.laplace_beltrami(vg, fg)) @ u - energy) < 1e-12
 
@@ -280,16 +290,19 @@ def test_bad_field_inputs(closed_mesh):
 @pytest.mark.parametrize("mesh", ["closed", "open", "tetrahedron"])
 def test_gather_patterns_match_the_generic_sorted_pattern(mesh):
     """The gather-only G (E, V) and vertex-pair (V, V) patterns equal the sort-and-sum Pattern."""
+    from torch_edgevf.mesh.geometry import PAIR_A, PAIR_B
     from torch_edgevf.operators import kernels
     from torch_edgevf.operators.patterns import Pattern
-    from torch_edgevf.mesh.geometry import PAIR_A, PAIR_B
 
     if mesh == "closed":
         v, f = perturbed_icosphere(2, seed=1)
     elif mesh == "open":
         v, f = perturbed_grid(6, seed=2)
     else:  # opposite vertices across every edge are joined by an edge
-        v, f = perturbed_icosphere(0, seed=3)[0][:4], torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+        v, f = (
+            perturbed_icosphere(0, seed=3)[0][:4],
+            torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]),
+        )
     t = ev.Topology(f, num_vertices=v.shape[0])
     fe, ff = t.face_edges.numpy(), t.faces.numpy()
     x = torch.randn(9 * t.num_faces, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
@@ -312,10 +325,12 @@ def test_laplace_beltrami_equals_dense_product(mesh):
         v = torch.tensor([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=torch.float64)
         f = torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
     elif mesh == "octahedron":
-        v = torch.tensor([[0.0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]],
-                         dtype=torch.float64) + 0.05 * torch.randn(6, 3, dtype=torch.float64,
-                                                                    generator=torch.Generator().manual_seed(1))
-        f = torch.tensor([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
+        v = torch.tensor(
+            [[0.0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=torch.float64
+        ) + 0.05 * torch.randn(6, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+        f = torch.tensor(
+            [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]]
+        )
     elif mesh == "open":
         v, f = perturbed_grid(5, seed=4)
     else:

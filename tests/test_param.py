@@ -1,12 +1,11 @@
 """Seamless parametrization from a cross field (thesis chapter 4)."""
 
-
 import numpy as np
 import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.fields.param import comb, cut_graph, flipped_faces, parametrize, _tree_cumsum
+from torch_edgevf.fields.param import _tree_cumsum, comb, cut_graph, flipped_faces, parametrize
 from torch_edgevf.fields.singularities import face_frame_angles, singularities
 from torch_edgevf.mesh.topology import Topology
 
@@ -135,8 +134,10 @@ def test_split_and_face_singularities_become_cut_vertices():
     v = v + 0.01 * torch.randn(v.shape, generator=g, dtype=v.dtype)
     z = cross_field(v, f)
     topo = Topology(f)
-    zr = z * torch.polar(torch.ones(topo.num_edges, dtype=torch.float64),
-                         0.3 * torch.randn(topo.num_edges, generator=g, dtype=torch.float64))
+    zr = z * torch.polar(
+        torch.ones(topo.num_edges, dtype=torch.float64),
+        0.3 * torch.randn(topo.num_edges, generator=g, dtype=torch.float64),
+    )
     s = singularities(v, topo, zr, 4)
     P = parametrize(v, f, zr, round_integers=False)
     assert P.verts.shape[0] == v.shape[0] + s.singular_faces.numel()

@@ -4,7 +4,12 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.fields.poisson import GradientProjector, gradient_energy, gradient_projection_rhs, project_on_gradients
+from torch_edgevf.fields.poisson import (
+    GradientProjector,
+    gradient_energy,
+    gradient_projection_rhs,
+    project_on_gradients,
+)
 from torch_edgevf.mesh.topology import Topology
 
 

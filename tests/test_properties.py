@@ -68,9 +68,9 @@ def _valid(verts, faces):
 @st.composite
 def sphere_meshes(draw, max_points: int = 40):
     n = draw(st.integers(8, max_points))
-    seed = draw(st.integers(0, 2 ** 31 - 1))
+    seed = draw(st.integers(0, 2**31 - 1))
     v, f = ev.meshes.sphere_delaunay(n, seed)
-    v, f, _ = renumber(v, f, draw(st.integers(0, 2 ** 31 - 1)))
+    v, f, _ = renumber(v, f, draw(st.integers(0, 2**31 - 1)))
     return _valid(v, f)
 
 
@@ -78,7 +78,7 @@ def sphere_meshes(draw, max_points: int = 40):
 def grid_meshes(draw):
     nx, ny = draw(st.integers(1, 5)), draw(st.integers(1, 5))
     v, f = ev.meshes.grid(nx, ny)
-    seed = draw(st.integers(0, 2 ** 31 - 1))
+    seed = draw(st.integers(0, 2**31 - 1))
     scale = draw(st.floats(0.0, 0.3))
     g = torch.Generator().manual_seed(seed)
     noise = torch.randn(v.shape, generator=g, dtype=v.dtype) * scale / max(nx, ny)
@@ -98,13 +98,17 @@ def assert_hermitian_psd(a: torch.Tensor, what: str, rtol: float = 1e-10):
     herm = float((a - a.conj().T).abs().max())
     assert herm <= rtol * scale, f"{what} not Hermitian: {herm:.3g} (scale {scale:.3g})"
     evals = torch.linalg.eigvalsh((a + a.conj().T) / 2)
-    assert float(evals.min()) >= -1e-9 * scale, f"{what} not PSD: smallest eigenvalue {float(evals.min()):.3g}"
+    assert float(evals.min()) >= -1e-9 * scale, (
+        f"{what} not PSD: smallest eigenvalue {float(evals.min()):.3g}"
+    )
     return evals
 
 
 def random_complex(n: int, seed: int) -> torch.Tensor:
     g = torch.Generator().manual_seed(seed)
-    return torch.complex(torch.randn(n, generator=g, dtype=torch.float64), torch.randn(n, generator=g, dtype=torch.float64))
+    return torch.complex(
+        torch.randn(n, generator=g, dtype=torch.float64), torch.randn(n, generator=g, dtype=torch.float64)
+    )
 
 
 # --------------------------------------------------------------------------- identities
@@ -190,7 +194,7 @@ def embed(perm: torch.Tensor, sign: torch.Tensor, size: int) -> torch.Tensor:
 
 
 @props(10)
-@given(mesh=any_meshes, seed=st.integers(0, 2 ** 31 - 1), n=st.sampled_from([1, 2, 3, 4]))
+@given(mesh=any_meshes, seed=st.integers(0, 2**31 - 1), n=st.sampled_from([1, 2, 3, 4]))
 def test_renumbering_permutes_operators(mesh, seed, n):
     v, f = mesh
     topo = ev.Topology(f, v.shape[0])
@@ -199,7 +203,7 @@ def test_renumbering_permutes_operators(mesh, seed, n):
     pos, sign = edge_map(topo, topo2, inv)
     ne, nv = topo.num_edges, topo.num_vertices
     q1 = embed(pos, sign, ne).to(torch.complex128)
-    qn = embed(pos, sign ** n, ne).to(torch.complex128)
+    qn = embed(pos, sign**n, ne).to(torch.complex128)
     pe = embed(pos, torch.ones(ne, dtype=torch.float64), ne)
     pv = embed(inv, torch.ones(nv, dtype=torch.float64), nv)
 
@@ -208,22 +212,28 @@ def test_renumbering_permutes_operators(mesh, seed, n):
         err = float((new - old_mapped).abs().max())
         assert err <= 1e-12 * scale, f"{what}: renumbered operator differs by {err:.3g}"
 
-    close(dense(ev.connection_laplacian(v2, topo2, n)), qn @ dense(ev.connection_laplacian(v, topo, n)) @ qn.T,
-          f"L_c^({n})")
+    close(
+        dense(ev.connection_laplacian(v2, topo2, n)),
+        qn @ dense(ev.connection_laplacian(v, topo, n)) @ qn.T,
+        f"L_c^({n})",
+    )
     close(dense(ev.mass_matrix(v2, topo2)), pe @ dense(ev.mass_matrix(v, topo)) @ pe.T, "M_z")
     close(dense(ev.gradient(v2, topo2)), q1 @ dense(ev.gradient(v, topo)) @ pv.T.to(torch.complex128), "G")
     close(dense(ev.laplace_beltrami(v2, topo2)), pv @ dense(ev.laplace_beltrami(v, topo)) @ pv.T, "L")
     close(dense(ev.vertex_mass(v2, topo2)), pv @ dense(ev.vertex_mass(v, topo)) @ pv.T, "M_v")
     w = random_complex(ne, seed % 10_000)
-    close(dense(ev.covariant_derivative(v2, topo2, q1 @ w)),
-          q1 @ dense(ev.covariant_derivative(v, topo, w)) @ q1.T, "D_w")
+    close(
+        dense(ev.covariant_derivative(v2, topo2, q1 @ w)),
+        q1 @ dense(ev.covariant_derivative(v, topo, w)) @ q1.T,
+        "D_w",
+    )
     # face operators: faces keep their order, so K only sees the edge map
     k_old = dense(ev.curl_div_operator(v, topo))
     close(dense(ev.curl_div_operator(v2, topo2)), k_old @ embed(pos, sign, ne).T, "K")
 
 
 @props(8)
-@given(mesh=sphere_meshes(), seed=st.integers(0, 2 ** 31 - 1), n=st.sampled_from([1, 2, 4]))
+@given(mesh=sphere_meshes(), seed=st.integers(0, 2**31 - 1), n=st.sampled_from([1, 2, 4]))
 def test_singularities_sum_to_euler_characteristic_and_follow_renumbering(mesh, seed, n):
     sing = pytest.importorskip("torch_edgevf.fields.singularities")
     v, f = mesh
@@ -246,7 +256,9 @@ def test_singularities_sum_to_euler_characteristic_and_follow_renumbering(mesh, 
 def test_module_matches_functions(mesh):
     v, f = mesh
     op = ev.EdgeOperators(v, f, n=2)
-    for name, fn in (("connection_laplacian", lambda: ev.connection_laplacian(v, f, 2)),
-                     ("gradient", lambda: ev.gradient(v, f)),
-                     ("laplace_beltrami", lambda: ev.laplace_beltrami(v, f))):
+    for name, fn in (
+        ("connection_laplacian", lambda: ev.connection_laplacian(v, f, 2)),
+        ("gradient", lambda: ev.gradient(v, f)),
+        ("laplace_beltrami", lambda: ev.laplace_beltrami(v, f)),
+    ):
         torch.testing.assert_close(dense(getattr(op, name)), dense(fn()), rtol=1e-12, atol=1e-12)

@@ -38,8 +38,9 @@ def near(img: np.ndarray, color, tol: float = 0.12) -> np.ndarray:
 
 def random_field(ne: int, seed: int = 0) -> torch.Tensor:
     g = torch.Generator().manual_seed(seed)
-    return torch.complex(torch.randn(ne, generator=g, dtype=torch.float64),
-                         torch.randn(ne, generator=g, dtype=torch.float64))
+    return torch.complex(
+        torch.randn(ne, generator=g, dtype=torch.float64), torch.randn(ne, generator=g, dtype=torch.float64)
+    )
 
 
 def assert_shows_mesh(img: np.ndarray):
@@ -48,7 +49,7 @@ def assert_shows_mesh(img: np.ndarray):
     distinct = np.unique((img.reshape(-1, 3) * 255).round().astype(np.int64), axis=0)
     assert len(distinct) >= 20, f"only {len(distinct)} distinct colours"
     fg = foreground(img)
-    centre = fg[int(0.35 * h):int(0.65 * h), int(0.35 * w):int(0.65 * w)]
+    centre = fg[int(0.35 * h) : int(0.65 * h), int(0.35 * w) : int(0.65 * w)]
     assert centre.mean() > 0.95, f"mesh covers only {centre.mean():.0%} of the image centre"
     rows, cols = np.flatnonzero(fg.any(1)), np.flatnonzero(fg.any(0))
     assert (rows[-1] - rows[0]) / h > 0.8 and (cols[-1] - cols[0]) / w > 0.8, (
@@ -114,7 +115,7 @@ def naive_face_directions(v, topo, z, n):
             i, j = topo.edges[e].tolist()
             xe = (v[j] - v[i]) / np.linalg.norm(v[j] - v[i])
             u = complex(xe @ xt, xe @ yt)
-            w += (u ** n) * complex(z[e]) / 3
+            w += (u**n) * complex(z[e]) / 3
         for k in range(n):
             root = abs(w) * np.exp(1j * (np.angle(w) + 2 * math.pi * k) / n)
             out[t, k] = root.real * xt + root.imag * yt
@@ -139,8 +140,11 @@ def test_singularities_png_colours_by_sign(sphere, tmp_path):
     vi = np.zeros(topo.num_vertices)
     fi[rng.choice(topo.num_faces, 30, replace=False)] = 1.0
     vi[rng.choice(topo.num_vertices, 30, replace=False)] = -1.0
-    img = read_png(render.render_singularities(v, f, tmp_path / "s.png", torch.from_numpy(fi),
-                                               torch.from_numpy(vi), size=SIZE))
+    img = read_png(
+        render.render_singularities(
+            v, f, tmp_path / "s.png", torch.from_numpy(fi), torch.from_numpy(vi), size=SIZE
+        )
+    )
     assert_shows_mesh(img)
     assert near(img, GREEN).mean() > 1e-3 and near(img, RED).mean() > 1e-3
 
@@ -151,8 +155,9 @@ def test_singularities_of_a_field(sphere, tmp_path):
     z = random_field(topo.num_edges, seed=1)
     s = sing.singularities(v, f, z, 1)
     assert (s.face_index > 0).any() and (s.face_index < 0).any()
-    img = read_png(render.render_singularities(v, f, tmp_path / "s.png", s.face_index, s.vertex_index,
-                                               z=z, size=SIZE))
+    img = read_png(
+        render.render_singularities(v, f, tmp_path / "s.png", s.face_index, s.vertex_index, z=z, size=SIZE)
+    )
     assert near(img, GREEN).mean() > 1e-4 and near(img, RED).mean() > 1e-4
     assert near(img, GLYPH, 0.08).mean() > 0.02
 
@@ -172,12 +177,15 @@ def test_hidden_singularity_is_not_drawn(sphere, tmp_path):
 def test_parametrization_checkerboard(tmp_path):
     v, f = ev.meshes.grid(8, 8)
     uv = v[:, :2][f]  # (F, 3, 2)
-    img = read_png(render.render_parametrization(v, f, uv, tmp_path / "p.png", scale=4, subdivide=3,
-                                                 elev=90, azim=-90, size=SIZE))
+    img = read_png(
+        render.render_parametrization(
+            v, f, uv, tmp_path / "p.png", scale=4, subdivide=3, elev=90, azim=-90, size=SIZE
+        )
+    )
     fg = foreground(img)
     assert fg.mean() > 0.7
     # the light squares are shaded white-ish but not background white; the dark ones blue
-    dark = (img[..., 2] > img[..., 0] + 0.2)
+    dark = img[..., 2] > img[..., 0] + 0.2
     frac = dark[fg].mean()
     assert 0.35 < frac < 0.65, f"dark squares cover {frac:.0%} of the grid, expected about half"
     # a 4 x 4 checkerboard: along the middle row the colour changes about 4 times
@@ -189,8 +197,12 @@ def test_parametrization_checkerboard(tmp_path):
 def test_parametrization_on_sphere_shows_mesh(sphere, tmp_path):
     v, f, _ = sphere
     vv = v.numpy()
-    uv = np.stack([np.arctan2(vv[:, 1], vv[:, 0]) / math.pi, np.arccos(np.clip(vv[:, 2], -1, 1)) / math.pi], -1)
-    img = read_png(render.render_parametrization(v, f, uv[f.numpy()], tmp_path / "p.png", subdivide=1, size=SIZE))
+    uv = np.stack(
+        [np.arctan2(vv[:, 1], vv[:, 0]) / math.pi, np.arccos(np.clip(vv[:, 2], -1, 1)) / math.pi], -1
+    )
+    img = read_png(
+        render.render_parametrization(v, f, uv[f.numpy()], tmp_path / "p.png", subdivide=1, size=SIZE)
+    )
     assert_shows_mesh(img)
 
 
@@ -224,8 +236,11 @@ def test_parametrization_from_param_module(sphere, tmp_path):
     design = pytest.importorskip("torch_edgevf.fields.design")
     v, f, _ = sphere
     result = param.parametrize(v, f, design.smoothest_field(v, f, 4))
-    img = read_png(render.render_parametrization(result.verts, result.faces, result.uv, tmp_path / "p.png",
-                                                 scale=1.0, size=SIZE))
+    img = read_png(
+        render.render_parametrization(
+            result.verts, result.faces, result.uv, tmp_path / "p.png", scale=1.0, size=SIZE
+        )
+    )
     assert_shows_mesh(img)
     fg = foreground(img)
     dark = (img[..., 2] > img[..., 0] + 0.2)[fg].mean()

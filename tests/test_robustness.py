@@ -85,8 +85,17 @@ def check_pipeline(verts, faces, name: str, ns=(1,)) -> dict:
     with time_limit(TIME_LIMIT_S, name):
         op = ev.EdgeOperators(verts, faces, n=1)
         topo = op.topology
-        for attr in ("mass", "connection_laplacian", "gradient", "curl_div", "laplace_beltrami",
-                     "vertex_mass", "lumped_vertex_mass", "face_area", "edge_length"):
+        for attr in (
+            "mass",
+            "connection_laplacian",
+            "gradient",
+            "curl_div",
+            "laplace_beltrami",
+            "vertex_mass",
+            "lumped_vertex_mass",
+            "face_area",
+            "edge_length",
+        ):
             vals = _values(getattr(op, attr))
             assert vals.dtype in (torch.float64, torch.complex128), f"{name}: {attr} is {vals.dtype}"
             assert bool(torch.isfinite(vals).all()), f"{name}: {attr} has NaN/Inf"
@@ -111,7 +120,8 @@ def check_pipeline(verts, faces, name: str, ns=(1,)) -> dict:
                 diag = lc.values()[idx[0] == idx[1]].real
                 scale = float((diag / _values(op.mass)[idx[0][idx[0] == idx[1]]]).max())
                 assert math.isfinite(energy) and energy >= -1e-10 * scale, (
-                    f"{name}: Dirichlet energy {energy} (scale {scale:.3g})")
+                    f"{name}: Dirichlet energy {energy} (scale {scale:.3g})"
+                )
             out["fields"][n] = z
             if singularities is not None:
                 s = singularities(verts, topo, z, n)
@@ -121,7 +131,9 @@ def check_pipeline(verts, faces, name: str, ns=(1,)) -> dict:
                 chi = topo.euler_characteristic
                 assert s.euler_characteristic == chi
                 if topo.is_closed:
-                    assert s.total == chi, f"{name}: n={n} indices sum to {s.total}, Euler characteristic {chi}"
+                    assert s.total == chi, (
+                        f"{name}: n={n} indices sum to {s.total}, Euler characteristic {chi}"
+                    )
                     assert s.boundary_turning == 0
                 else:
                     assert math.isclose(s.total, chi + s.boundary_turning, abs_tol=1e-9), (
@@ -178,8 +190,8 @@ def psb_mesh(k: int):
     if d is None:
         pytest.skip(f"{PSB} is not available")
     vo, fo = d["vert_offsets"], d["face_offsets"]
-    verts = torch.from_numpy(d["verts"][vo[k]:vo[k + 1]].astype(np.float64))
-    faces = torch.from_numpy(d["faces"][fo[k]:fo[k + 1]])  # int32, as stored
+    verts = torch.from_numpy(d["verts"][vo[k] : vo[k + 1]].astype(np.float64))
+    faces = torch.from_numpy(d["faces"][fo[k] : fo[k + 1]])  # int32, as stored
     return verts, faces, int(d["psb_ids"][k]), int(d["euler"][k])
 
 
@@ -188,7 +200,7 @@ def _zero_area_faces(verts: torch.Tensor, faces: torch.Tensor) -> list[int]:
     p = verts.numpy()[faces.numpy().astype(np.int64)]
     area2 = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     lmax = np.linalg.norm(p - p[:, [1, 2, 0]], axis=2).max(1)
-    return np.flatnonzero(area2 <= 1e-12 * lmax ** 2).tolist()
+    return np.flatnonzero(area2 <= 1e-12 * lmax**2).tolist()
 
 
 def check_psb(k: int):
@@ -251,7 +263,7 @@ def split_face(verts, faces, face: int, bary):
     p = (torch.tensor(bary, dtype=torch.float64)[:, None] * v[[a, b, c]]).sum(0)
     new = v.shape[0]
     v = torch.cat([v, p[None]])
-    rest = torch.cat([f[:face], f[face + 1:]])
+    rest = torch.cat([f[:face], f[face + 1 :]])
     tri = torch.tensor([[a, b, new], [b, c, new], [c, a, new]])
     return v, torch.cat([rest, tri])
 
@@ -261,8 +273,12 @@ def mobius(n: int = 12):
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)
     verts = []
     for s in (-0.3, 0.3):
-        verts.append(np.stack([(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t),
-                               s * np.sin(t / 2)], 1))
+        verts.append(
+            np.stack(
+                [(1 + s * np.cos(t / 2)) * np.cos(t), (1 + s * np.cos(t / 2)) * np.sin(t), s * np.sin(t / 2)],
+                1,
+            )
+        )
     v = np.concatenate(verts)
     faces = []
     for i in range(n):
@@ -284,7 +300,11 @@ def _case_non_manifold_edge():
     a, b = f[0, 0].item(), f[0, 1].item()
     v = torch.cat([v, torch.tensor([[0.0, 0.0, 3.0]], dtype=v.dtype)])
     f = torch.cat([f, torch.tensor([[a, b, v.shape[0] - 1]])])
-    return v, f, rf"non-manifold edges.*\({min(a, b)}, {max(a, b)}\).*faces involved \[[^\]]*\b{f.shape[0] - 1}\b"
+    return (
+        v,
+        f,
+        rf"non-manifold edges.*\({min(a, b)}, {max(a, b)}\).*faces involved \[[^\]]*\b{f.shape[0] - 1}\b",
+    )
 
 
 def _case_non_manifold_vertex():
@@ -409,16 +429,20 @@ def test_bad_mesh_raises_value_error_naming_location(case):
             fn()
 
 
-@pytest.mark.parametrize(
-    "case", BAD
-)
+@pytest.mark.parametrize("case", BAD)
 def test_geometry_and_diagnose_report_bad_mesh(case):
     """The geometry entry points and diagnose() never crash: ValueError / a listed problem."""
     v, f, pattern = BAD[case]()
     diagnosis = diagnose(v, f)
     assert not diagnosis.ok and any(re.search(pattern, p) for p in diagnosis.problems), diagnosis.problems
-    if case in ("non_manifold_edge", "non_manifold_vertex", "bowtie", "duplicated_face",
-                "duplicated_face_flipped", "flipped_face"):
+    if case in (
+        "non_manifold_edge",
+        "non_manifold_vertex",
+        "bowtie",
+        "duplicated_face",
+        "duplicated_face_flipped",
+        "flipped_face",
+    ):
         ev.face_areas(v, f)  # purely topological problems: per-face geometry is still defined
     else:
         with pytest.raises(ValueError):

@@ -67,7 +67,9 @@ def disk(rings: int = 8, shift=(0.0, 0.0)):
     p = np.concatenate(pts)
     tri = Delaunay(p).simplices.astype(np.int64)
     a = p[tri]
-    cross = (a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1]) - (a[:, 1, 1] - a[:, 0, 1]) * (a[:, 2, 0] - a[:, 0, 0])
+    cross = (a[:, 1, 0] - a[:, 0, 0]) * (a[:, 2, 1] - a[:, 0, 1]) - (a[:, 1, 1] - a[:, 0, 1]) * (
+        a[:, 2, 0] - a[:, 0, 0]
+    )
     tri[cross < 0] = tri[cross < 0][:, [0, 2, 1]]
     v = np.concatenate([p + np.asarray(shift), np.zeros((len(p), 1))], 1)
     return torch.from_numpy(v), torch.from_numpy(tri)
@@ -182,7 +184,7 @@ def test_poincare_hopf_with_zero_values_and_antipodal_pairs(n):
     assert s0.total == 2
     # antipodal values across every face: omega = +-pi everywhere, still exact
     z1 = torch.ones(topo.num_edges, dtype=torch.complex128)
-    s1 = singularities(v, topo, z1 * -1 ** torch.arange(topo.num_edges), n=n)
+    s1 = singularities(v, topo, z1 * -(1 ** torch.arange(topo.num_edges)), n=n)
     assert s1.total == 2
 
 

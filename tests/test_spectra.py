@@ -51,7 +51,7 @@ def _spectrum_errors(levels, n):
         # multiplicity: each group of 2l+1 eigenvalues is a tight cluster around its value
         start = 0
         for l in ls:
-            group = vals[start:start + 2 * l + 1]
+            group = vals[start : start + 2 * l + 1]
             gap = (2 * l + 2) if n is None else (2 * l + 2)  # distance to the next degree
             assert np.ptp(group) < 0.25 * gap, (level, n, l, group)
             start += 2 * l + 1

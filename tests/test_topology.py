@@ -123,7 +123,7 @@ def _fans_reference(f: np.ndarray) -> np.ndarray:
     # corners at the same vertex in faces sharing an edge through that vertex are linked
     pairs = {}
     for face, (a, b, c) in enumerate(f):
-        for k, (u, w) in enumerate(((a, b), (b, c), (c, a))):
+        for u, w in ((a, b), (b, c), (c, a)):
             pairs.setdefault((min(u, w), max(u, w)), []).append((face, u, w))
     rows, cols = [], []
     for (u, w), members in pairs.items():
@@ -182,8 +182,16 @@ def test_int64_work_arrays_give_the_same_topology_and_operators(mesh, monkeypatc
     monkeypatch.setattr(topology_module, "_work_dtype", lambda nv, nf: np.int64)
     large = Topology(f, num_vertices=v.shape[0])
     assert large.side_corners().dtype == np.int64 and small.side_corners().dtype == np.int32
-    for name in ("faces", "edges", "face_edges", "face_edge_signs", "edge_faces", "edge_corners",
-                 "boundary_edges", "boundary_vertices"):
+    for name in (
+        "faces",
+        "edges",
+        "face_edges",
+        "face_edge_signs",
+        "edge_faces",
+        "edge_corners",
+        "boundary_edges",
+        "boundary_vertices",
+    ):
         a, b = getattr(small, name), getattr(large, name)
         assert a.dtype == b.dtype and torch.equal(a, b), name
     for n in (0, 1, 3):

@@ -6,8 +6,8 @@ import pytest
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.mesh.topology import Topology
 from torch_edgevf.fields.transport import Transporter, transport
+from torch_edgevf.mesh.topology import Topology
 
 EZ = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
 

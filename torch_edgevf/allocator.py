@@ -33,7 +33,9 @@ _M_MMAP_THRESHOLD = -3
 MiB = 1 << 20
 
 
-def tune_allocator(keep_bytes: int = 256 * MiB, mmap_threshold: int = 32 * MiB, top_pad: int = 64 * MiB) -> bool:
+def tune_allocator(
+    keep_bytes: int = 256 * MiB, mmap_threshold: int = 32 * MiB, top_pad: int = 64 * MiB
+) -> bool:
     """Let glibc keep and reuse freed memory instead of returning it to the system.
 
     Parameters
@@ -68,7 +70,11 @@ def tune_allocator(keep_bytes: int = 256 * MiB, mmap_threshold: int = 32 * MiB, 
     mallopt.restype = ctypes.c_int
     ok = all(
         mallopt(param, value) == 1
-        for param, value in ((_M_MMAP_THRESHOLD, mmap_threshold), (_M_TRIM_THRESHOLD, keep_bytes), (_M_TOP_PAD, top_pad))
+        for param, value in (
+            (_M_MMAP_THRESHOLD, mmap_threshold),
+            (_M_TRIM_THRESHOLD, keep_bytes),
+            (_M_TOP_PAD, top_pad),
+        )
     )
     log.debug("tune_allocator: %s", "applied" if ok else "rejected by mallopt")
     return ok

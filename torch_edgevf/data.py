@@ -6,9 +6,9 @@ Re-exports :mod:`torch_edgevf.learning.precompute`, :mod:`~torch_edgevf.learning
 """
 
 from .learning.batching import (
-    collate_meshes,
     MeshBatch,
     MeshSample,
+    collate_meshes,
 )
 from .learning.cache import (
     OperatorCache,
@@ -18,11 +18,11 @@ from .learning.datasets import (
     PSBDataset,
 )
 from .learning.precompute import (
+    MeshFields,
+    MeshOperators,
     compute_operators,
     heat_kernel_signature,
     vertex_gradient_operator,
-    MeshFields,
-    MeshOperators,
 )
 from .learning.progress import (
     progress,

@@ -1,6 +1,14 @@
 """The layers of :mod:`torch_edgevf.learning.layers`, under the name ``torch_edgevf.nn``."""
 
 from .learning.layers import (
+    ComplexLinear,
+    DivergenceFeatures,
+    EdgePooling,
+    GradientFeatures,
+    InvariantReadout,
+    LearnedDiffusion,
+    ModReLU,
+    ModulusNorm,
     complex_linear,
     divergence_features,
     gradient_features,
@@ -13,14 +21,6 @@ from .learning.layers import (
     pool_global,
     positive_time,
     spectral_diffusion,
-    ComplexLinear,
-    DivergenceFeatures,
-    EdgePooling,
-    GradientFeatures,
-    InvariantReadout,
-    LearnedDiffusion,
-    ModReLU,
-    ModulusNorm,
 )
 
 __all__ = [

@@ -126,13 +126,15 @@ def _prune(topo: Topology, cut: np.ndarray, keep_vertex: np.ndarray) -> np.ndarr
     deg = np.bincount(edges[cut | bnd].ravel(), minlength=nv)
     # vertex -> incident cut edges (CSR)
     ce = np.flatnonzero(cut)
-    inc = sp.csr_matrix((np.ones(2 * ce.size), (edges[ce].ravel(), np.repeat(ce, 2))), shape=(nv, topo.num_edges))
+    inc = sp.csr_matrix(
+        (np.ones(2 * ce.size), (edges[ce].ravel(), np.repeat(ce, 2))), shape=(nv, topo.num_edges)
+    )
     stack = list(np.flatnonzero((deg == 1) & ~keep_vertex))
     while stack:
         v = stack.pop()
         if deg[v] != 1 or keep_vertex[v]:
             continue
-        row = inc.indices[inc.indptr[v]:inc.indptr[v + 1]]
+        row = inc.indices[inc.indptr[v] : inc.indptr[v + 1]]
         live = row[cut[row]]
         if live.size != 1:
             continue
@@ -278,8 +280,11 @@ def _round(x, H, b, C, Tlo, cls, fl, keep, ncls, weight, max_rounds, round_cones
         H = (H + weight * (S.T @ S)).tocsc()
         b = b + weight * (S.T @ s_val)
         x = sla.spsolve(H, b)
-    log.info("cones rounded: seams residual %.3g, cones residual %.3g",
-             np.abs(C @ x).max(initial=0), np.abs(S @ x - s_val).max(initial=0))
+    log.info(
+        "cones rounded: seams residual %.3g, cones residual %.3g",
+        np.abs(C @ x).max(initial=0),
+        np.abs(S @ x - s_val).max(initial=0),
+    )
     n_edges = Tlo.shape[0] // 2
     fixed = np.zeros(n_edges, dtype=bool)
     rounds = 0
@@ -301,7 +306,10 @@ def _round(x, H, b, C, Tlo, cls, fl, keep, ncls, weight, max_rounds, round_cones
         rounds += 1
     log.info(
         "rounding: %d cone copies, %d re-solves; residuals: seams %.3g, cones %.3g, translations %.3g",
-        s_cls.size, rounds, np.abs(C @ x).max(initial=0), np.abs(S @ x - s_val).max(initial=0),
+        s_cls.size,
+        rounds,
+        np.abs(C @ x).max(initial=0),
+        np.abs(S @ x - s_val).max(initial=0),
         np.abs(Tlo @ x - np.rint(Tlo @ x)).max(initial=0),
     )
     return x
@@ -444,7 +452,9 @@ def parametrize(
     a = np.concatenate([3 * f0 + (k0 + 1) % 3, 3 * f0 + (k0 + 2) % 3])
     b = np.concatenate([3 * f1 + (k1 + 2) % 3, 3 * f1 + (k1 + 1) % 3])
     nc = 3 * nf
-    ncls, cls = csg.connected_components(sp.coo_matrix((np.ones(a.size), (a, b)), shape=(nc, nc)), directed=False)
+    ncls, cls = csg.connected_components(
+        sp.coo_matrix((np.ones(a.size), (a, b)), shape=(nc, nc)), directed=False
+    )
     cls = cls.reshape(nf, 3)
 
     vnp = verts.numpy()
@@ -461,7 +471,7 @@ def parametrize(
     w = np.sqrt(area / area.sum())
     rows = np.broadcast_to(np.arange(2 * nf).reshape(nf, 2, 1), (nf, 2, 3))
     cols = np.broadcast_to(cls[:, None, :], (nf, 2, 3))
-    vals = (w[:, None, None] * np.transpose(grad, (0, 2, 1)))  # (F, 2, 3)
+    vals = w[:, None, None] * np.transpose(grad, (0, 2, 1))  # (F, 2, 3)
     B = sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * nf, ncls))
     A_ls = sp.block_diag([B, B]).tocsr()  # unknowns: [u (ncls), v (ncls)]
     rhs = np.concatenate([(w[:, None] * U).ravel(), (w[:, None] * V).ravel()])
@@ -493,8 +503,10 @@ def parametrize(
 
     r1, c1, v1 = transition_rows(hi_g, hi_f, 1.0)
     r2, c2, v2 = transition_rows(lo_g, lo_f, -1.0)
-    C = sp.csr_matrix((np.concatenate([v1, v2]), (np.concatenate([r1, r2]), np.concatenate([c1, c2]))),
-                      shape=(2 * ce.size, 2 * ncls))
+    C = sp.csr_matrix(
+        (np.concatenate([v1, v2]), (np.concatenate([r1, r2]), np.concatenate([c1, c2]))),
+        shape=(2 * ce.size, 2 * ncls),
+    )
     Tlo = sp.csr_matrix((np.concatenate([v2 * -1]), (r2, c2)), shape=(2 * ce.size, 2 * ncls))
 
     # gauge: pin one class per connected component of the cut mesh to (0, 0)

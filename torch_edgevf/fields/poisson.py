@@ -83,7 +83,9 @@ def _reduced(L: torch.Tensor, pins: torch.Tensor, unref: torch.Tensor):
     keep = (r >= 0) & (c >= 0)
     dev = L.device
     red = torch.sparse_coo_tensor(
-        torch.stack([r[keep], c[keep]]).to(dev), L.values()[keep.to(dev)], (free.numel(), free.numel()),
+        torch.stack([r[keep], c[keep]]).to(dev),
+        L.values()[keep.to(dev)],
+        (free.numel(), free.numel()),
         check_invariants=False,
     ).coalesce()
     return red, free.to(dev)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -16,6 +17,7 @@ import torch
 from .precompute import MeshFields, MeshOperators
 
 __all__ = ["MeshSample", "MeshBatch", "collate_meshes"]
+
 
 @dataclass
 class MeshSample:
@@ -37,8 +39,9 @@ def _block_diagonal(mats: Sequence[torch.Tensor], row_offsets, col_offsets) -> t
         idx.append(m.indices() + torch.tensor([[r], [c]]))
         vals.append(m.values())
     shape = (int(row_offsets[-1]), int(col_offsets[-1]))
-    return torch.sparse_coo_tensor(torch.cat(idx, 1), torch.cat(vals), shape, is_coalesced=True,
-                                   check_invariants=False)
+    return torch.sparse_coo_tensor(
+        torch.cat(idx, 1), torch.cat(vals), shape, is_coalesced=True, check_invariants=False
+    )
 
 
 @dataclass(kw_only=True)
@@ -75,7 +78,7 @@ class MeshBatch(MeshFields):
         return int(self.vertex_offsets.shape[0] - 1)
 
     @classmethod
-    def from_operators(cls, operators: MeshOperators, features, label=None) -> "MeshBatch":
+    def from_operators(cls, operators: MeshOperators, features, label=None) -> MeshBatch:
         return collate_meshes([MeshSample(operators, features, label)])
 
 
@@ -106,7 +109,9 @@ def collate_meshes(samples: Sequence[MeshSample]) -> MeshBatch:
         if (o.vertex_gradient is None) != (first.vertex_gradient is None):
             raise ValueError("either all or no meshes of a batch have a vertex_gradient")
         if s.features.dim() != 2 or s.features.shape[0] != o.num_vertices:
-            raise ValueError(f"features must have shape (V, C) with V = {o.num_vertices}, got {tuple(s.features.shape)}")
+            raise ValueError(
+                f"features must have shape (V, C) with V = {o.num_vertices}, got {tuple(s.features.shape)}"
+            )
         if s.features.shape[1] != samples[0].features.shape[1]:
             raise ValueError("all samples of a batch need the same number of feature channels")
     nv = torch.tensor([0] + [o.num_vertices for o in ops_list]).cumsum(0)
@@ -117,11 +122,13 @@ def collate_meshes(samples: Sequence[MeshSample]) -> MeshBatch:
     def batch_vector(offsets):
         return torch.repeat_interleave(torch.arange(len(samples)), offsets[1:] - offsets[:-1])
 
-    labels = [s.label for s in samples]
+    labels: list[Any] = [s.label for s in samples]  # narrowed by the checks below
     if all(lab is None for lab in labels):
         label_t = None
-    elif all(isinstance(lab, (int, np.integer)) or (isinstance(lab, torch.Tensor) and lab.dim() == 0)
-             for lab in labels):
+    elif all(
+        isinstance(lab, (int, np.integer)) or (isinstance(lab, torch.Tensor) and lab.dim() == 0)
+        for lab in labels
+    ):
         label_t = torch.tensor([int(lab) for lab in labels], dtype=torch.int64)
     elif all(isinstance(lab, torch.Tensor) and lab.dim() == 1 for lab in labels):
         label_t = cat([lab.to(torch.int64) for lab in labels])
@@ -143,9 +150,18 @@ def collate_meshes(samples: Sequence[MeshSample]) -> MeshBatch:
         edge_evecs=cat([o.edge_evecs for o in ops_list]),
         vertex_evals=torch.stack([o.vertex_evals for o in ops_list]),
         vertex_evecs=cat([o.vertex_evecs for o in ops_list]),
-        vertex_gradient=(None if first.vertex_gradient is None
-                         else _block_diagonal([o.vertex_gradient for o in ops_list], nv, nv)),
-        vertex_offsets=nv, edge_offsets=ne, face_offsets=nf,
-        vertex_batch=batch_vector(nv), edge_batch=batch_vector(ne), face_batch=batch_vector(nf),
+        vertex_gradient=(
+            None
+            if first.vertex_gradient is None
+            else _block_diagonal(
+                [o.vertex_gradient for o in ops_list if o.vertex_gradient is not None], nv, nv
+            )
+        ),
+        vertex_offsets=nv,
+        edge_offsets=ne,
+        face_offsets=nf,
+        vertex_batch=batch_vector(nv),
+        edge_batch=batch_vector(ne),
+        face_batch=batch_vector(nf),
         indices=torch.tensor([s.index for s in samples], dtype=torch.int64),
     )

@@ -56,7 +56,7 @@ def _to_arrays(o: MeshOperators) -> dict:
 
 
 def _from_arrays(arrays: dict) -> MeshOperators:
-    kwargs = {}
+    kwargs: dict[str, object] = {}
     for f in fields(MeshOperators):
         if f.name == "n":
             kwargs["n"] = int(arrays["n"])
@@ -68,14 +68,18 @@ def _from_arrays(arrays: dict) -> MeshOperators:
                 raise KeyError(f"{f.name}.indices")
             idx = torch.from_numpy(arrays[f"{f.name}.indices"].astype(np.int64))
             shape = tuple(int(s) for s in arrays[f"{f.name}.shape"])
-            if idx.dim() != 2 or idx.shape[0] != 2 or (idx.numel() and (idx.min() < 0 or idx[0].max() >= shape[0]
-                                                                        or idx[1].max() >= shape[1])):
+            if (
+                idx.dim() != 2
+                or idx.shape[0] != 2
+                or (idx.numel() and (idx.min() < 0 or idx[0].max() >= shape[0] or idx[1].max() >= shape[1]))
+            ):
                 raise ValueError(f"{f.name}: indices out of range")
-            kwargs[f.name] = torch.sparse_coo_tensor(idx, torch.from_numpy(arrays[f"{f.name}.values"]), shape,
-                                                     check_invariants=False).coalesce()
+            kwargs[f.name] = torch.sparse_coo_tensor(
+                idx, torch.from_numpy(arrays[f"{f.name}.values"]), shape, check_invariants=False
+            ).coalesce()
         else:
             kwargs[f.name] = torch.from_numpy(arrays[f.name])
-    return MeshOperators(**kwargs)
+    return MeshOperators(**kwargs)  # type: ignore[arg-type]  # types checked by out.check()
 
 
 def _content_hash(arrays: dict) -> str:
@@ -116,13 +120,19 @@ class OperatorCache:
         """The cache key of a mesh and options (JSON-serialisable dict)."""
         v = as_verts(verts).detach().to(torch.float64).cpu().numpy()
         f = (faces.faces if isinstance(faces, Topology) else as_faces(faces)).cpu().numpy().astype(np.int64)
-        return {"faces": _sha256(f), "verts": _sha256(v), "options": {k: options[k] for k in sorted(options)},
-                "version": __version__}
+        return {
+            "faces": _sha256(f),
+            "verts": _sha256(v),
+            "options": {k: options[k] for k in sorted(options)},
+            "version": __version__,
+        }
 
     def path(self, key: dict) -> Path:
         """File of an entry: from the mesh hashes and options (not the version)."""
         stem = {k: key[k] for k in ("faces", "verts", "options")}
-        return self.root / (hashlib.sha256(json.dumps(stem, sort_keys=True).encode()).hexdigest()[:40] + ".npz")
+        return self.root / (
+            hashlib.sha256(json.dumps(stem, sort_keys=True).encode()).hexdigest()[:40] + ".npz"
+        )
 
     def load(self, key: dict) -> MeshOperators | None:
         """The verified entry for ``key``, or None (missing, or invalid: logged)."""
@@ -143,8 +153,12 @@ class OperatorCache:
             out.check()
             return out
         except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
-            logger.warning("operator cache entry %s is invalid (%s: %s); rebuilding it", path.name,
-                           type(exc).__name__, exc)
+            logger.warning(
+                "operator cache entry %s is invalid (%s: %s); rebuilding it",
+                path.name,
+                type(exc).__name__,
+                exc,
+            )
             return None
 
     def save(self, key: dict, operators: MeshOperators) -> Path:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -32,7 +33,8 @@ class PSBDataset(torch.utils.data.Dataset):
     Degenerate faces: one mesh (psb id 351) has a zero-area face, which the operators
     reject. ``degenerate="repair"`` (default) collapses a short edge of each such face
     (:func:`repair_degenerate_faces`: one vertex and two faces fewer, no vertex moved)
-    and logs a warning naming the psb ids; ``"skip"`` leaves such meshes out, with a warning listing their ids;
+    and logs a warning naming the psb ids; ``"skip"`` leaves such meshes out, with a warning
+    listing their ids;
     ``"error"`` raises ``ValueError``.
 
     Parameters
@@ -48,10 +50,21 @@ class PSBDataset(torch.utils.data.Dataset):
     show_progress : bool or None (auto: a terminal, not pytest)
     """
 
-    def __init__(self, path=DEFAULT_PSB_PATH, split: str = "train", cache_dir=None, n: int = 1,
-                 k_edge: int = 32, k_vertex: int = 32, vertex_gradient: bool = True, hks_count: int = 16,
-                 dtype: torch.dtype = torch.float32, degenerate: str = "repair", ids=None,
-                 show_progress: bool | None = None):
+    def __init__(
+        self,
+        path=DEFAULT_PSB_PATH,
+        split: str = "train",
+        cache_dir=None,
+        n: int = 1,
+        k_edge: int = 32,
+        k_vertex: int = 32,
+        vertex_gradient: bool = True,
+        hks_count: int = 16,
+        dtype: torch.dtype = torch.float32,
+        degenerate: str = "repair",
+        ids=None,
+        show_progress: bool | None = None,
+    ):
         if split not in ("train", "test", "all"):
             raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
         if degenerate not in ("repair", "skip", "error"):
@@ -69,18 +82,21 @@ class PSBDataset(torch.utils.data.Dataset):
             keep &= d["split"] == (0 if split == "train" else 1)
         if ids is not None:
             keep &= np.isin(d["psb_ids"], np.asarray(list(ids)))
-        self.options = dict(n=n, k_edge=k_edge, k_vertex=k_vertex, vertex_laplacian="cotan",
-                            vertex_gradient=vertex_gradient)
+        self.options: dict[str, Any] = dict(
+            n=n, k_edge=k_edge, k_vertex=k_vertex, vertex_laplacian="cotan", vertex_gradient=vertex_gradient
+        )
         self.cache = OperatorCache(cache_dir) if cache_dir is not None else None
         self.dtype, self.hks_count = dtype, hks_count
         meshes, repaired, skipped = [], [], []
         for i in np.nonzero(keep)[0]:
-            v = d["verts"][d["vert_offsets"][i]:d["vert_offsets"][i + 1]]
-            f = d["faces"][d["face_offsets"][i]:d["face_offsets"][i + 1]].astype(np.int64)
+            v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]]
+            f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
             pid = int(d["psb_ids"][i])
             if len(find_degenerate_faces(v, f)):
                 if degenerate == "error":
-                    raise ValueError(f"PSB mesh {pid} has zero-area faces {find_degenerate_faces(v, f).tolist()}")
+                    raise ValueError(
+                        f"PSB mesh {pid} has zero-area faces {find_degenerate_faces(v, f).tolist()}"
+                    )
                 if degenerate == "skip":
                     skipped.append(pid)
                     continue
@@ -95,9 +111,14 @@ class PSBDataset(torch.utils.data.Dataset):
         self.psb_ids = [m[0] for m in meshes]
         self.labels = [m[1] for m in meshes]
         self.samples: list[MeshSample] = []
-        for j, (pid, label, v, f) in enumerate(progress(meshes, desc=f"PSB {split} operators",
-                                                        enabled=show_progress)):
-            o = self.cache.get(v, f, **self.options) if self.cache else compute_operators(v, f, **self.options)
+        for j, (_pid, label, v, f) in enumerate(
+            progress(meshes, desc=f"PSB {split} operators", enabled=show_progress)
+        ):
+            o = (
+                self.cache.get(v, f, **self.options)
+                if self.cache
+                else compute_operators(v, f, **self.options)
+            )
             area = float(o.face_area.sum())
             feats = heat_kernel_signature(o.vertex_evals, o.vertex_evecs, count=hks_count, area=area)
             self.samples.append(MeshSample(o.to(dtype), feats.to(dtype), label, j))

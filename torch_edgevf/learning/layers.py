@@ -171,13 +171,17 @@ def spectral_diffusion(z, evals, evecs, mass, times, offsets=None) -> torch.Tens
     z = _check_features(z)
     n, c = z.shape
     if not isinstance(evecs, torch.Tensor) or evecs.dim() != 2 or evecs.shape[0] != n:
-        raise ValueError(f"evecs must have shape ({n}, k), got "
-                         f"{tuple(evecs.shape) if isinstance(evecs, torch.Tensor) else type(evecs).__name__}")
+        raise ValueError(
+            f"evecs must have shape ({n}, k), got "
+            f"{tuple(evecs.shape) if isinstance(evecs, torch.Tensor) else type(evecs).__name__}"
+        )
     k = evecs.shape[1]
     mass = _check_vector(mass, n, "mass")
     if not isinstance(times, torch.Tensor) or times.shape != (c,) or times.is_complex():
-        raise ValueError(f"times must be a real ({c},) tensor (one per channel), got "
-                         f"{tuple(times.shape) if isinstance(times, torch.Tensor) else type(times).__name__}")
+        raise ValueError(
+            f"times must be a real ({c},) tensor (one per channel), got "
+            f"{tuple(times.shape) if isinstance(times, torch.Tensor) else type(times).__name__}"
+        )
     if not isinstance(evals, torch.Tensor) or evals.is_complex():
         raise ValueError("evals must be a real tensor")
     x = z * mass[:, None].to(real_dtype(z.dtype))
@@ -185,7 +189,8 @@ def spectral_diffusion(z, evals, evecs, mass, times, offsets=None) -> torch.Tens
         if evals.shape != (k,):
             raise ValueError(f"evals must have shape ({k},), got {tuple(evals.shape)}")
         coeffs = evecs.conj().transpose(0, 1).to(torch.promote_types(evecs.dtype, x.dtype)) @ x.to(
-            torch.promote_types(evecs.dtype, x.dtype))
+            torch.promote_types(evecs.dtype, x.dtype)
+        )
         coeffs = coeffs * torch.exp(-evals[:, None] * times[None, :])
         return evecs.to(coeffs.dtype) @ coeffs
     offsets = [int(o) for o in offsets]
@@ -193,12 +198,14 @@ def spectral_diffusion(z, evals, evecs, mass, times, offsets=None) -> torch.Tens
     if nb < 1 or offsets[0] != 0 or offsets[-1] != n or any(b < a for a, b in zip(offsets, offsets[1:])):
         raise ValueError(f"offsets must rise from 0 to N = {n}, got {offsets}")
     if evals.shape != (nb, k):
-        raise ValueError(f"evals must have shape ({nb}, {k}) for a batch of {nb} meshes, got {tuple(evals.shape)}")
+        raise ValueError(
+            f"evals must have shape ({nb}, {k}) for a batch of {nb} meshes, got {tuple(evals.shape)}"
+        )
     dtype = torch.promote_types(evecs.dtype, x.dtype)
     out = []
     for b in range(nb):
-        phi = evecs[offsets[b]:offsets[b + 1]].to(dtype)
-        coeffs = phi.conj().transpose(0, 1) @ x[offsets[b]:offsets[b + 1]].to(dtype)
+        phi = evecs[offsets[b] : offsets[b + 1]].to(dtype)
+        coeffs = phi.conj().transpose(0, 1) @ x[offsets[b] : offsets[b + 1]].to(dtype)
         coeffs = coeffs * torch.exp(-evals[b][:, None] * times[None, :])
         out.append(phi @ coeffs)
     return torch.cat(out, dim=0)
@@ -236,7 +243,9 @@ def implicit_diffusion(z, L, mass, times) -> torch.Tensor:
         raise ValueError("L must store every diagonal entry (its pattern lacks some)")
     vals = L.values()
     m_on_pattern = torch.zeros_like(vals.real if vals.is_complex() else vals)
-    m_on_pattern = m_on_pattern.index_put((torch.nonzero(diag).flatten(),), mass[rows[diag]].to(m_on_pattern.dtype))
+    m_on_pattern = m_on_pattern.index_put(
+        (torch.nonzero(diag).flatten(),), mass[rows[diag]].to(m_on_pattern.dtype)
+    )
     rhs = z * mass[:, None].to(real_dtype(z.dtype))
     if vals.is_complex() and not rhs.is_complex():
         rhs = rhs.to(vals.dtype)
@@ -266,7 +275,9 @@ class LearnedDiffusion(nn.Module):
     implicit: ``forward(z, mass, L=...)``.
     """
 
-    def __init__(self, channels: int, method: str = "spectral", init_times=None, positivity: str = "softplus"):
+    def __init__(
+        self, channels: int, method: str = "spectral", init_times=None, positivity: str = "softplus"
+    ):
         super().__init__()
         if method not in ("spectral", "implicit"):
             raise ValueError(f"method must be 'spectral' or 'implicit', got {method!r}")
@@ -488,8 +499,9 @@ class InvariantReadout(nn.Module):
     def __init__(self, channels: int, products: bool = True, modulus: bool = True):
         super().__init__()
         self.modulus = modulus
-        self.weight = (nn.Parameter(torch.randn(channels, channels, 2) / math.sqrt(2 * channels))
-                       if products else None)
+        self.weight = (
+            nn.Parameter(torch.randn(channels, channels, 2) / math.sqrt(2 * channels)) if products else None
+        )
         self.out_channels = channels * (int(modulus) + int(products))
 
     def forward(self, z):
@@ -603,7 +615,9 @@ class EdgePooling(nn.Module):
             raise ValueError(f"to must be 'vertex', 'face' or 'global', got {to!r}")
         self.to_ = to
 
-    def forward(self, x, weight=None, edges=None, num_vertices=None, face_edges=None, batch=None, num_meshes=None):
+    def forward(
+        self, x, weight=None, edges=None, num_vertices=None, face_edges=None, batch=None, num_meshes=None
+    ):
         if self.to_ == "vertex":
             if edges is None or num_vertices is None:
                 raise ValueError("vertex pooling needs edges and num_vertices")
@@ -618,10 +632,13 @@ class EdgePooling(nn.Module):
         return f"to={self.to_!r}"
 
 
-def normalize_modulus(z, weight=None, batch=None, num_meshes: int | None = None, eps: float = 1e-8) -> torch.Tensor:
+def normalize_modulus(
+    z, weight=None, batch=None, num_meshes: int | None = None, eps: float = 1e-8
+) -> torch.Tensor:
     r"""Divide each channel of each mesh by its weighted root-mean-square modulus.
 
-    .. math::  z_e \leftarrow z_e \Big/ \sqrt{\textstyle\sum_{e'} w_{e'} |z_{e'}|^2 / \sum_{e'} w_{e'} + \epsilon}
+    .. math::  z_e \leftarrow z_e \Big/
+               \sqrt{\textstyle\sum_{e'} w_{e'} |z_{e'}|^2 / \sum_{e'} w_{e'} + \epsilon}
 
     over the edges of the same mesh; gauge equivariant (the scale is invariant).
 
@@ -632,7 +649,7 @@ def normalize_modulus(z, weight=None, batch=None, num_meshes: int | None = None,
     batch : (N,) int tensor, optional (mesh of each row)
     """
     z = _check_features(z)
-    power = pool_global(z.real ** 2 + z.imag ** 2 if z.is_complex() else z ** 2, weight, batch, num_meshes)
+    power = pool_global(z.real**2 + z.imag**2 if z.is_complex() else z**2, weight, batch, num_meshes)
     scale = torch.rsqrt(power + eps)
     return z * (scale if batch is None else scale[batch]).to(real_dtype(z.dtype))
 

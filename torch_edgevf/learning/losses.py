@@ -83,7 +83,7 @@ def _quadratic_form(A: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
 
 
 def _mass_norm2(mass: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-    return (mass[:, None] * (z.real ** 2 + z.imag ** 2)).sum(0)
+    return (mass[:, None] * (z.real**2 + z.imag**2)).sum(0)
 
 
 def _nonzero(den: torch.Tensor, name: str) -> torch.Tensor:
@@ -153,7 +153,9 @@ def alignment_loss(verts, topo, z, guide, n: int = 1, reduction: str = "mean") -
         wc = nth_power(wc, n)
     mass = mass_matrix(verts, topo).values()
     inner = (mass[:, None] * (wc.conj() * zc)).real.sum(0)
-    norms = torch.sqrt(_nonzero(_mass_norm2(mass, wc), "|guide|_M") * _nonzero(_mass_norm2(mass, zc), "|z|_M"))
+    norms = torch.sqrt(
+        _nonzero(_mass_norm2(mass, wc), "|guide|_M") * _nonzero(_mass_norm2(mass, zc), "|z|_M")
+    )
     value = 1 - inner / norms
     return _squeeze_like(_reduce(value, reduction), z, reduction)
 
@@ -164,7 +166,7 @@ def _face_energy(verts, topo, z, which: str, normalize: bool, reduction: str) ->
     zc = _as_columns(z)
     per_face = (face_curl if which == "curl" else face_div)(verts, topo, zc)  # (F, C)
     area = face_areas(verts, topo.faces)
-    value = (area[:, None] * per_face ** 2).sum(0)
+    value = (area[:, None] * per_face**2).sum(0)
     if normalize:
         value = value / _nonzero(_mass_norm2(mass_matrix(verts, topo).values(), zc), "z^H M_z z")
     return _squeeze_like(_reduce(value, reduction), z, reduction)
@@ -181,7 +183,9 @@ def curl_loss(verts, topo, z, normalize: bool = False, reduction: str = "mean") 
 
 
 def div_loss(verts, topo, z, normalize: bool = False, reduction: str = "mean") -> torch.Tensor:
-    r"""The divergence energy :math:`\int_M \mathrm{div}(\psi)^2 = \sum_T A_T\, \mathrm{div}_T^2` (thesis 3.3).
+    r"""The divergence energy (thesis 3.3).
+
+    .. math::  \int_M \mathrm{div}(\psi)^2 = \sum_T A_T\, \mathrm{div}_T^2
 
     ``div_T = -K Im(z) / A_T``. See :func:`curl_loss`.
     """
@@ -210,8 +214,16 @@ def laplace_beltrami_spectrum(verts, topo, k: int, lumped: bool = False, **eigsh
     return eigsh(L, M, k=k, **eigsh_kwargs).values
 
 
-def spectral_loss(verts, topo, target, k: int | None = None, skip_zero: bool = True, relative: bool = True,
-                  lumped: bool = False, **eigsh_kwargs) -> torch.Tensor:
+def spectral_loss(
+    verts,
+    topo,
+    target,
+    k: int | None = None,
+    skip_zero: bool = True,
+    relative: bool = True,
+    lumped: bool = False,
+    **eigsh_kwargs,
+) -> torch.Tensor:
     r"""Mismatch of the first Laplace-Beltrami eigenvalues with a target spectrum.
 
     .. math::  \frac{1}{k'} \sum_i \left(\frac{\lambda_i(V) - \mu_i}{\mu_i}\right)^2
@@ -244,4 +256,4 @@ def spectral_loss(verts, topo, target, k: int | None = None, skip_zero: bool = T
         if bool((mu.abs() <= 0).any()):
             raise ValueError("relative spectral loss needs nonzero target eigenvalues (use skip_zero)")
         err = err / mu
-    return (err ** 2).mean()
+    return (err**2).mean()

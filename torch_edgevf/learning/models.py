@@ -46,8 +46,12 @@ _HEADS = ("global", "vertex", "face")
 
 
 def _check_common(in_channels, out_channels, width, num_blocks, head):
-    for name, v in (("in_channels", in_channels), ("out_channels", out_channels), ("width", width),
-                    ("num_blocks", num_blocks)):
+    for name, v in (
+        ("in_channels", in_channels),
+        ("out_channels", out_channels),
+        ("width", width),
+        ("num_blocks", num_blocks),
+    ):
         if not isinstance(v, int) or v < (0 if name == "num_blocks" else 1):
             raise ValueError(f"{name} must be a positive integer, got {v!r}")
     if head not in _HEADS:
@@ -55,7 +59,7 @@ def _check_common(in_channels, out_channels, width, num_blocks, head):
 
 
 def _mlp(sizes, dropout: float = 0.0) -> nn.Sequential:
-    layers = []
+    layers: list[nn.Module] = []
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
         if i > 0:
             layers.append(nn.ReLU())
@@ -73,8 +77,10 @@ def _symlog(x: torch.Tensor) -> torch.Tensor:
 def _check_batch(batch, in_channels: int) -> None:
     f = getattr(batch, "features", None)
     if not isinstance(f, torch.Tensor) or f.dim() != 2 or f.shape[1] != in_channels:
-        raise ValueError(f"batch.features must be (V, {in_channels}), got "
-                         f"{tuple(f.shape) if isinstance(f, torch.Tensor) else type(f).__name__}")
+        raise ValueError(
+            f"batch.features must be (V, {in_channels}), got "
+            f"{tuple(f.shape) if isinstance(f, torch.Tensor) else type(f).__name__}"
+        )
 
 
 # --------------------------------------------------------------------------- edge network
@@ -104,8 +110,9 @@ class EdgeDiffusionBlock(nn.Module):
 
     def forward(self, z, batch):
         if self.diffusion.method == "spectral":
-            zd = self.diffusion(z, batch.edge_mass, evals=batch.edge_evals, evecs=batch.edge_evecs,
-                                offsets=batch.edge_offsets)
+            zd = self.diffusion(
+                z, batch.edge_mass, evals=batch.edge_evals, evecs=batch.edge_evecs, offsets=batch.edge_offsets
+            )
         else:
             zd = self.diffusion(z, batch.edge_mass, L=batch.connection_laplacian)
         inv = _symlog(torch.cat([self.readout(zd), z.abs()], dim=1))
@@ -133,8 +140,17 @@ class EdgeFieldNet(nn.Module):
     ``forward(batch) -> (B | V | F, out_channels)`` logits.
     """
 
-    def __init__(self, in_channels: int, out_channels: int, width: int = 32, num_blocks: int = 4,
-                 head: str = "global", dropout: float = 0.0, diffusion: str = "spectral", use_scalars: bool = True):
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        width: int = 32,
+        num_blocks: int = 4,
+        head: str = "global",
+        dropout: float = 0.0,
+        diffusion: str = "spectral",
+        use_scalars: bool = True,
+    ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head)
         self.in_channels, self.head, self.use_scalars = in_channels, head, use_scalars
@@ -157,7 +173,7 @@ class EdgeFieldNet(nn.Module):
         for block in self.blocks:
             z = block(z, batch)
         s = _symlog(self.readout(z))
-        if self.use_scalars:
+        if self.scalars is not None:
             e = batch.edges
             s = torch.cat([s, self.scalars(0.5 * (f[e[:, 0]] + f[e[:, 1]])).to(s.dtype)], dim=1)
         return self.edge_mlp(s)
@@ -187,8 +203,13 @@ class DiffusionNetBlock(nn.Module):
         self.mlp = _mlp([3 * width, width, width], dropout)
 
     def forward(self, x, batch):
-        xd = self.diffusion(x, batch.vertex_mass, evals=batch.vertex_evals, evecs=batch.vertex_evecs,
-                            offsets=batch.vertex_offsets)
+        xd = self.diffusion(
+            x,
+            batch.vertex_mass,
+            evals=batch.vertex_evals,
+            evecs=batch.vertex_evecs,
+            offsets=batch.vertex_offsets,
+        )
         cdt = torch.complex64 if x.dtype == torch.float32 else torch.complex128
         g = torch.sparse.mm(batch.vertex_gradient.to(cdt), xd.to(cdt))
         gf = torch.tanh(invariant_features(g, self.grad_weight, modulus=False))
@@ -203,8 +224,15 @@ class DiffusionNetBaseline(nn.Module):
     :class:`EdgeFieldNet` (but for ``diffusion``/``use_scalars``).
     """
 
-    def __init__(self, in_channels: int, out_channels: int, width: int = 32, num_blocks: int = 4,
-                 head: str = "global", dropout: float = 0.0):
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        width: int = 32,
+        num_blocks: int = 4,
+        head: str = "global",
+        dropout: float = 0.0,
+    ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head)
         self.in_channels, self.head = in_channels, head
@@ -215,7 +243,9 @@ class DiffusionNetBaseline(nn.Module):
     def forward(self, batch):
         _check_batch(batch, self.in_channels)
         if batch.vertex_gradient is None:
-            raise ValueError("DiffusionNetBaseline needs batch.vertex_gradient (compute_operators(vertex_gradient=True))")
+            raise ValueError(
+                "DiffusionNetBaseline needs batch.vertex_gradient (compute_operators(vertex_gradient=True))"
+            )
         x = self.first(batch.features)
         for block in self.blocks:
             x = block(x, batch)

@@ -153,7 +153,10 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     v = verts.to(torch.float64).numpy()
     f = topo.faces.numpy()
     e = topo.edges.numpy()
-    fn = face_normals(verts.to(torch.float64), topo).numpy() * face_areas(verts.to(torch.float64), topo).numpy()[:, None]
+    fn = (
+        face_normals(verts.to(torch.float64), topo).numpy()
+        * face_areas(verts.to(torch.float64), topo).numpy()[:, None]
+    )
     normal = np.zeros_like(v)
     np.add.at(normal, f.ravel(), np.repeat(fn, 3, axis=0))
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
@@ -180,13 +183,21 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     D = sp.coo_matrix((vals, (rows, cols)), shape=(v.shape[0],) * 2).tocsr().tocoo()
     cdtype = complex_dtype(verts.dtype)
     idx = torch.from_numpy(np.stack([D.row, D.col]).astype(np.int64))
-    return torch.sparse_coo_tensor(idx, torch.from_numpy(D.data).to(cdtype), D.shape,
-                                   check_invariants=False).coalesce()
+    return torch.sparse_coo_tensor(
+        idx, torch.from_numpy(D.data).to(cdtype), D.shape, check_invariants=False
+    ).coalesce()
 
 
-def compute_operators(verts, faces, n: int = 1, k_edge: int = 32, k_vertex: int = 32,
-                      vertex_laplacian: str = "cotan", vertex_gradient: bool = False,
-                      tol: float | None = None) -> MeshOperators:
+def compute_operators(
+    verts,
+    faces,
+    n: int = 1,
+    k_edge: int = 32,
+    k_vertex: int = 32,
+    vertex_laplacian: str = "cotan",
+    vertex_gradient: bool = False,
+    tol: float | None = None,
+) -> MeshOperators:
     """Compute the :class:`MeshOperators` of a mesh, in float64.
 
     Parameters
@@ -218,7 +229,9 @@ def compute_operators(verts, faces, n: int = 1, k_edge: int = 32, k_vertex: int 
     edge_mass = ops.mass_matrix(verts, topo).values()
     Lc = ops.connection_laplacian(verts, topo, n)
     vmass = ops.vertex_mass(verts, topo, lumped=True).values()
-    Lv = ops.cotan_laplacian(verts, topo) if vertex_laplacian == "cotan" else ops.laplace_beltrami(verts, topo)
+    Lv = (
+        ops.cotan_laplacian(verts, topo) if vertex_laplacian == "cotan" else ops.laplace_beltrami(verts, topo)
+    )
     with torch.no_grad():
         edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
         vertex = eigsh(Lv, vmass, k_vertex, tol=tol)
@@ -227,11 +240,21 @@ def compute_operators(verts, faces, n: int = 1, k_edge: int = 32, k_vertex: int 
     ew, ev = edge.values.clamp_min(0.0), edge.vectors
     vw, vv = vertex.values.clamp_min(0.0), vertex.vectors
     out = MeshOperators(
-        verts=verts, faces=topo.faces.clone(), edges=topo.edges.clone(), face_edges=topo.face_edges.clone(),
-        edge_mass=edge_mass, vertex_mass=vmass, face_area=face_areas(verts, topo),
-        gradient=ops.gradient(verts, topo).coalesce(), connection_laplacian=Lc.coalesce(),
-        edge_evals=ew, edge_evecs=ev.contiguous(), vertex_evals=vw, vertex_evecs=vv.contiguous(),
-        vertex_gradient=vertex_gradient_operator(verts, topo) if vertex_gradient else None, n=n,
+        verts=verts,
+        faces=topo.faces.clone(),
+        edges=topo.edges.clone(),
+        face_edges=topo.face_edges.clone(),
+        edge_mass=edge_mass,
+        vertex_mass=vmass,
+        face_area=face_areas(verts, topo),
+        gradient=ops.gradient(verts, topo).coalesce(),
+        connection_laplacian=Lc.coalesce(),
+        edge_evals=ew,
+        edge_evecs=ev.contiguous(),
+        vertex_evals=vw,
+        vertex_evecs=vv.contiguous(),
+        vertex_gradient=vertex_gradient_operator(verts, topo) if vertex_gradient else None,
+        n=n,
     )
     return out
 
@@ -257,9 +280,11 @@ def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) 
     (V, T) tensor.
     """
     if evecs.dim() != 2 or evals.shape != (evecs.shape[1],):
-        raise ValueError(f"evals (k,) and evecs (V, k) do not match: {tuple(evals.shape)}, {tuple(evecs.shape)}")
+        raise ValueError(
+            f"evals (k,) and evecs (V, k) do not match: {tuple(evals.shape)}, {tuple(evecs.shape)}"
+        )
     if times is None:
         times = torch.logspace(-2, 0, count, dtype=evals.dtype)
     area = torch.as_tensor(1.0 if area is None else area, dtype=evals.dtype)
     weights = torch.exp(-evals[None, :] * area * times.to(evals.dtype)[:, None])  # (T, k)
-    return area * (evecs ** 2) @ weights.transpose(0, 1)
+    return area * (evecs**2) @ weights.transpose(0, 1)

@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Sized
 
 __all__ = ["progress"]
+
 
 def _progress_enabled(enabled: bool | None) -> bool:
     if enabled is not None:
@@ -42,7 +43,7 @@ def progress(iterable: Iterable, total: int | None = None, desc: str = "", enabl
     Uses ``tqdm`` when it is installed, else a small built-in bar. ``enabled=None``
     (default) shows it only when stderr is a terminal and not under pytest.
     """
-    if total is None and hasattr(iterable, "__len__"):
+    if total is None and isinstance(iterable, Sized):
         total = len(iterable)
     if not _progress_enabled(enabled):
         return iterable

@@ -4,10 +4,10 @@ All matrices are torch sparse tensors (coalesced COO preferred); gradients with 
 to a matrix are returned on its sparsity pattern, through its values.
 """
 
+from ._utils import sparse_matrix, to_scipy
 from .eigen import EigenPairs, eigsh
 from .expm import expm_multiply, implicit_euler
 from .factor import NotPositiveDefiniteError, factorize
-from ._utils import sparse_matrix, to_scipy
 from .solve import SparseSolver, solve, solve_constrained, solve_fixed
 
 __all__ = [

@@ -105,9 +105,9 @@ def pattern_outer(left: torch.Tensor, right: torch.Tensor, data: SparseData) -> 
     out = np.empty(row.size, dtype=np_dtype)
     step = max(1, _OUTER_CHUNK // max(1, lft.shape[1]))
     for s in range(0, row.size, step):
-        a = np.take(lft, row[s: s + step], axis=0)
-        b = np.take(rgt, col[s: s + step], axis=0)
-        np.einsum("nk,nk->n", a, b, out=out[s: s + step])
+        a = np.take(lft, row[s : s + step], axis=0)
+        b = np.take(rgt, col[s : s + step], axis=0)
+        np.einsum("nk,nk->n", a, b, out=out[s : s + step])
     return torch.from_numpy(out)
 
 
@@ -126,15 +126,22 @@ class _SparseMatrix(torch.autograd.Function):
             gi = grad._indices()
             if grad.is_coalesced() and (gi.data_ptr() == idx.data_ptr() or torch.equal(gi, idx)):
                 return None, grad._values(), None  # same pattern: the values are the gradient
-            mask = torch.sparse_coo_tensor(idx, torch.ones(idx.shape[1], dtype=grad.dtype, device=idx.device),
-                                           ctx.size, is_coalesced=True, check_invariants=False)
+            mask = torch.sparse_coo_tensor(
+                idx,
+                torch.ones(idx.shape[1], dtype=grad.dtype, device=idx.device),
+                ctx.size,
+                is_coalesced=True,
+                check_invariants=False,
+            )
             return None, grad.coalesce().sparse_mask(mask)._values(), None
         if grad.layout != torch.strided:
             grad = grad.to_dense()
         return None, grad[idx[0], idx[1]], None
 
 
-def sparse_matrix(indices: torch.Tensor, values: torch.Tensor, size, *, assume_sorted: bool = False) -> torch.Tensor:
+def sparse_matrix(
+    indices: torch.Tensor, values: torch.Tensor, size, *, assume_sorted: bool = False
+) -> torch.Tensor:
     """Sparse COO matrix from ``indices`` (2, nnz) and ``values`` (nnz,), with a cheap backward.
 
     Same result as ``torch.sparse_coo_tensor(indices, values, size).coalesce()``.  When
@@ -151,9 +158,16 @@ def sparse_matrix(indices: torch.Tensor, values: torch.Tensor, size, *, assume_s
     n_rows, n_cols = int(size[0]), int(size[1])
     if assume_sorted:
         return _SparseMatrix.apply(indices, values, (n_rows, n_cols))
-    if indices.dim() != 2 or indices.shape[0] != 2 or values.dim() != 1 or values.shape[0] != indices.shape[1]:
-        raise ValueError(f"indices must be (2, nnz) and values (nnz,), got {tuple(indices.shape)} "
-                         f"and {tuple(values.shape)}")
+    if (
+        indices.dim() != 2
+        or indices.shape[0] != 2
+        or values.dim() != 1
+        or values.shape[0] != indices.shape[1]
+    ):
+        raise ValueError(
+            f"indices must be (2, nnz) and values (nnz,), got {tuple(indices.shape)} "
+            f"and {tuple(values.shape)}"
+        )
     lin = indices[0] * n_cols + indices[1]
     if lin.numel() > 1 and not bool((lin[1:] > lin[:-1]).all()):
         return torch.sparse_coo_tensor(indices, values, (n_rows, n_cols)).coalesce()
@@ -177,9 +191,7 @@ def check_finite(x: torch.Tensor, name: str) -> None:
 
 def _check_dtype(x: torch.Tensor, name: str) -> None:
     if x.dtype not in _FLOAT_DTYPES:
-        raise ValueError(
-            f"{name} must be float32, float64, complex64 or complex128, got {x.dtype}"
-        )
+        raise ValueError(f"{name} must be float32, float64, complex64 or complex128, got {x.dtype}")
 
 
 def as_sparse(A: torch.Tensor, name: str = "A") -> SparseData:

@@ -68,7 +68,6 @@ class EigenPairs(NamedTuple):
     vectors: torch.Tensor
 
 
-
 # ---------------------------------------------------------------------------- backward
 
 
@@ -100,7 +99,7 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
     Z = project(precond(R))
     P = Z.copy()
     rz = np.sum(R.conj() * Z, axis=0)
-    for it in range(maxiter):
+    for _ in range(maxiter):
         Q = apply(P)
         alpha = np.where(active, rz / np.where(active, np.sum(P.conj() * Q, axis=0), 1), 0)
         W += P * alpha
@@ -115,14 +114,31 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
     else:
         logger.warning(
             "eigenvector backward: complement CG did not converge in %d iterations "
-            "(small gap after the k-th eigenvalue?)", maxiter)
+            "(small gap after the k-th eigenvalue?)",
+            maxiter,
+        )
     return W
+
 
 class _Eigsh(torch.autograd.Function):
     @staticmethod
     @blas_single_thread
-    def forward(ctx, a_values, m_values, a_data, m_data, k, sigma, method, tol, maxiter, ncv,
-                v0, degeneracy_rtol, block_size):
+    def forward(
+        ctx,
+        a_values,
+        m_values,
+        a_data,
+        m_data,
+        k,
+        sigma,
+        method,
+        tol,
+        maxiter,
+        ncv,
+        v0,
+        degeneracy_rtol,
+        block_size,
+    ):
         A = a_data.to_scipy()
         M = m_data.to_scipy().astype(A.real.dtype)
         if sigma is None:
@@ -133,8 +149,9 @@ class _Eigsh(torch.autograd.Function):
         if method == "dense":
             lam, X = lanczos.eig_dense(A, M, k)
         else:
-            lam, X, ctx.factor = lanczos.shift_invert_eigsh(A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv,
-                                                     v0=v0, block_size=block_size)
+            lam, X, ctx.factor = lanczos.shift_invert_eigsh(
+                A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
+            )
         X = lanczos.fix_phase(X)
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
         ctx.a_data, ctx.m_data = a_data, m_data
@@ -189,8 +206,13 @@ def _eigenvector_adjoint(ctx, lam, X, G):
         raise ValueError(
             "eigenvector gradient is undefined: the loss depends on the basis chosen inside "
             "a degenerate eigenspace; use a loss invariant to rotations within it "
-            "(e.g. of the projector X X^H) or perturb the problem")
-    F = torch.where(degenerate, torch.zeros_like(XG), XG / torch.where(degenerate, 1.0, diff).fill_diagonal_(1.0).to(XG.dtype))
+            "(e.g. of the projector X X^H) or perturb the problem"
+        )
+    F = torch.where(
+        degenerate,
+        torch.zeros_like(XG),
+        XG / torch.where(degenerate, 1.0, diff).fill_diagonal_(1.0).to(XG.dtype),
+    )
     F.fill_diagonal_(0)
     U = X @ F
     W = _complement_adjoint(ctx, lam, X, G)
@@ -207,8 +229,9 @@ def _complement_adjoint(ctx, lam, X, G):
     if ctx.factor is None:
         ctx.factor = factorize((A - ctx.sigma * M).tocsc(), "auto", hermitian=True, many_solves=True)
     eps = float(np.finfo(A.dtype).eps)
-    W = _complement_solve(A, M, Xn, lam_n, R, ctx.factor.solve, tol=max(1e-12, 10 * eps),
-                          maxiter=max(100, min(n, 1000)))
+    W = _complement_solve(
+        A, M, Xn, lam_n, R, ctx.factor.solve, tol=max(1e-12, 10 * eps), maxiter=max(100, min(n, 1000))
+    )
     return from_numpy(W, X, X.dtype)
 
 
@@ -287,7 +310,20 @@ def eigsh(
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     eps = float(torch.finfo(a_data.dtype).eps)
     tol = (1e-13 if eps < 1e-10 else 1e-6) if tol is None else tol
-    degeneracy_rtol = eps ** 0.5 if degeneracy_rtol is None else degeneracy_rtol
-    lam, X = _Eigsh.apply(a_data.values, m_data.values, a_data, m_data, k, sigma, method, tol,
-                          maxiter, ncv, v0, degeneracy_rtol, block_size)
+    degeneracy_rtol = eps**0.5 if degeneracy_rtol is None else degeneracy_rtol
+    lam, X = _Eigsh.apply(
+        a_data.values,
+        m_data.values,
+        a_data,
+        m_data,
+        k,
+        sigma,
+        method,
+        tol,
+        maxiter,
+        ncv,
+        v0,
+        degeneracy_rtol,
+        block_size,
+    )
     return EigenPairs(lam, X)

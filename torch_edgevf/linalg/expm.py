@@ -82,8 +82,9 @@ class _Generator:
         fwd = lambda x: self.minv(self.A @ x)  # noqa: E731
         bwd = lambda x: AH @ self.minv(x)  # noqa: E731
         mv, rmv = (bwd, fwd) if adjoint else (fwd, bwd)
-        return sla.LinearOperator(self.A.shape, matvec=mv, rmatvec=rmv, matmat=mv, rmatmat=rmv,
-                                  dtype=self.A.dtype)
+        return sla.LinearOperator(
+            self.A.shape, matvec=mv, rmatvec=rmv, matmat=mv, rmatmat=rmv, dtype=self.A.dtype
+        )
 
     def _norm1(self) -> float:
         if isinstance(self.K, sla.LinearOperator):
@@ -171,8 +172,9 @@ class _ExpmMultiply(torch.autograd.Function):
             grad_t = -torch.tensor(float(np.real(np.vdot(g_np, ky))), dtype=t.dtype, device=t.device)
         need_a, need_m = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
         if need_a or need_m:
-            ga, gm = _matrix_gradients(gen, tf, to_numpy(z0).astype(y_np.dtype), g_np,
-                                       ctx.a_data, ctx.m_data, need_a, need_m)
+            ga, gm = _matrix_gradients(
+                gen, tf, to_numpy(z0).astype(y_np.dtype), g_np, ctx.a_data, ctx.m_data, need_a, need_m
+            )
             if need_a:
                 ga = from_numpy(np.asarray(ga), g, y.dtype)
                 grad_a = ga if ctx.a_data.is_complex else ga.real.to(ctx.a_data.dtype)
@@ -181,7 +183,7 @@ class _ExpmMultiply(torch.autograd.Function):
         return grad_a, grad_m, grad_z0, grad_t, None, None
 
 
-def _prepare(A, M, z0, t):
+def _prepare(A, M, z0, t) -> tuple[SparseData, SparseData, torch.Tensor]:
     a_data, m_data = as_matrix_pair(A, M)
     n = a_data.n
     check_rhs(z0, n, a_data.dtype, "z0")

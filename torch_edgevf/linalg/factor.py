@@ -75,7 +75,7 @@ METHODS = ("auto", "cholesky", "lu")
 CHOLMOD_MODE = "simplicial"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def cholmod_module():
     """``sksparse.cholmod`` if installed, else ``None`` (logged once)."""
     try:
@@ -90,7 +90,7 @@ def cholmod_module():
     return cholmod
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def cvxopt_cholmod_module():
     """``cvxopt.cholmod`` if installed (and not hidden, see the test set-up), else ``None``."""
     try:
@@ -101,7 +101,7 @@ def cvxopt_cholmod_module():
     return cvxopt, cholmod
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def cholespy_module():
     """``cholespy`` if installed, else ``None``."""
     try:
@@ -135,8 +135,12 @@ class _Factor:
     def solve(self, b: np.ndarray, adjoint: bool = False) -> np.ndarray:
         """Solve ``K x = b`` (``K^H x = b`` if ``adjoint``) for ``b`` of shape (N,) or (N, C)."""
         if np.iscomplexobj(b) and not np.iscomplexobj(np.empty(0, self.dtype)):
-            x = self._solve(np.concatenate([b.real, b.imag], axis=-1) if b.ndim == 2
-                            else np.stack([b.real, b.imag], axis=1), adjoint)
+            x = self._solve(
+                np.concatenate([b.real, b.imag], axis=-1)
+                if b.ndim == 2
+                else np.stack([b.real, b.imag], axis=1),
+                adjoint,
+            )
             half = x.shape[1] // 2
             x = x[:, :half] + 1j * x[:, half:]
             x = x if b.ndim == 2 else x[:, 0]
@@ -156,8 +160,7 @@ class _SuperLUFactor(_Factor):
         self.backend = "superlu-hermitian" if hermitian else "superlu"
         kwargs = {}
         if hermitian:
-            kwargs = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                          options=dict(SymmetricMode=True))
+            kwargs = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
         try:
             self._lu = sla.splu(K, **kwargs)
         except RuntimeError as err:
@@ -213,8 +216,12 @@ class _CholespyFactor(_Factor):
         K = K.astype(np.float64, copy=False)
         try:
             self._f = cholespy.CholeskySolverD(
-                self.n, K.indptr.astype(np.int32), K.indices.astype(np.int32),
-                np.ascontiguousarray(K.data), cholespy.MatrixType.CSC)
+                self.n,
+                K.indptr.astype(np.int32),
+                K.indices.astype(np.int32),
+                np.ascontiguousarray(K.data),
+                cholespy.MatrixType.CSC,
+            )
         except ValueError as err:  # "Matrix is not positive definite!"
             raise NotPositiveDefiniteError("the matrix is not positive definite") from err
 
@@ -246,8 +253,13 @@ class _CvxoptCholmodFactor(_Factor):
         self._tc = "z" if self._complex else "d"
         low = sp.tril(K, format="coo")
         data = low.data.astype(np.complex128 if self._complex else np.float64, copy=False)
-        A = cvxopt.spmatrix(cvxopt.matrix(np.ascontiguousarray(data)), cvxopt.matrix(low.row.astype(np.int64)),
-                            cvxopt.matrix(low.col.astype(np.int64)), K.shape, self._tc)
+        A = cvxopt.spmatrix(
+            cvxopt.matrix(np.ascontiguousarray(data)),
+            cvxopt.matrix(low.row.astype(np.int64)),
+            cvxopt.matrix(low.col.astype(np.int64)),
+            K.shape,
+            self._tc,
+        )
         cholmod.options["supernodal"] = 0 if simplicial else 2
         try:
             self._f = cholmod.symbolic(A, uplo="L")
@@ -260,8 +272,11 @@ class _CvxoptCholmodFactor(_Factor):
             inv_d = cvxopt.matrix(np.ones(self.n, dtype=np.complex128 if self._complex else np.float64))
             cholmod.solve(self._f, inv_d, sys=6)  # D x = 1: x = 1 / d
             inv_d = np.array(inv_d)[:, 0]
-            if not (np.all(np.isfinite(inv_d)) and np.all(inv_d.real > 0)
-                    and np.all(np.abs(inv_d.imag) <= 1e-8 * inv_d.real)):
+            if not (
+                np.all(np.isfinite(inv_d))
+                and np.all(inv_d.real > 0)
+                and np.all(np.abs(inv_d.imag) <= 1e-8 * inv_d.real)
+            ):
                 raise NotPositiveDefiniteError("the matrix is not positive definite")
 
     def _solve(self, b, adjoint):
@@ -273,8 +288,9 @@ class _CvxoptCholmodFactor(_Factor):
         return x.astype(np.result_type(b, self.dtype), copy=False)
 
 
-def factorize(K: sp.spmatrix, method: str = "auto", hermitian: bool | None = None,
-              many_solves: bool = False) -> _Factor:
+def factorize(
+    K: sp.spmatrix, method: str = "auto", hermitian: bool | None = None, many_solves: bool = False
+) -> _Factor:
     """Factor the SciPy matrix ``K`` with the best available back-end.
 
     Parameters
@@ -314,7 +330,8 @@ def _cholesky(K: sp.csc_matrix, many_solves: bool = False) -> _Factor:
         return _CholmodFactor(K, cholmod)
     cvx = cvxopt_cholmod_module()
     if cvx is not None:
-        return _CvxoptCholmodFactor(K, *cvx, simplicial=many_solves)
+        cvxopt, cvxopt_cholmod = cvx
+        return _CvxoptCholmodFactor(K, cvxopt, cvxopt_cholmod, simplicial=many_solves)
     if many_solves and not np.iscomplexobj(K.data):
         cholespy = cholespy_module()
         if cholespy is not None:
@@ -323,10 +340,10 @@ def _cholesky(K: sp.csc_matrix, many_solves: bool = False) -> _Factor:
     return _SuperLUFactor(K, hermitian=True, check_pd=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _log_no_cholespy():
-    logger.info("neither scikit-sparse nor cholespy is installed; real positive definite systems "
-                "are factored with SciPy SuperLU, whose solves are 3-4x slower (pip install "
-                "'torch_edgevf[cholespy]')")
-
-
+    logger.info(
+        "neither scikit-sparse nor cholespy is installed; real positive definite systems "
+        "are factored with SciPy SuperLU, whose solves are 3-4x slower (pip install "
+        "'torch_edgevf[cholespy]')"
+    )

@@ -67,8 +67,6 @@ def dense_is_faster(n, k):
     return n <= _DENSE_MAX or (n <= 6 * k and n <= _DENSE_MAX_MANY)
 
 
-
-
 # ----------------------------------------------------------------------------- forward
 
 
@@ -200,8 +198,9 @@ def _orthonormalize(W, V, inner: _Inner, rng, lo=0, out=None, gram=None, _depth=
         sd = np.sqrt(d[good])
         Qg = inner.gemm(1.0, W, U[:, good] / sd)
         fresh = rng.standard_normal((W.shape[0], b - ng)).astype(inner.dtype)
-        Qf, _, _ = _orthonormalize(fresh, np.asfortranarray(np.concatenate([V, Qg], axis=1)),
-                                   inner, rng, _depth=_depth + 1)
+        Qf, _, _ = _orthonormalize(
+            fresh, np.asfortranarray(np.concatenate([V, Qg], axis=1)), inner, rng, _depth=_depth + 1
+        )
         Q = np.asfortranarray(np.concatenate([Qg, Qf], axis=1))
         R = np.zeros((b, b), dtype=inner.dtype)
         R[:ng] = sd[:, None] * U[:, good].conj().T
@@ -221,7 +220,7 @@ def _rotate(V, cols, S, q, rows=4096):
     """``V[:, :q] = V[:, :cols] @ S[:, :q]`` in place, by row blocks (no ``(n, q)`` temporary)."""
     Sq = np.ascontiguousarray(S[:cols, :q])
     for r in range(0, V.shape[0], rows):
-        V[r: r + rows, :q] = V[r: r + rows, :cols] @ Sq
+        V[r : r + rows, :q] = V[r : r + rows, :cols] @ Sq
 
 
 def _largest_cluster(theta, resid, tol):
@@ -280,20 +279,22 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
     H = np.zeros((m, m), dtype=inner.dtype)
     start = np.asarray(v0, dtype=inner.dtype).reshape(n, -1)[:, :b]
     if start.shape[1] < b:
-        start = np.concatenate([start, rng.standard_normal((n, b - start.shape[1])).astype(inner.dtype)], axis=1)
+        start = np.concatenate(
+            [start, rng.standard_normal((n, b - start.shape[1])).astype(inner.dtype)], axis=1
+        )
     V[:, :b], _, _ = _orthonormalize(start, V[:, :0], inner, rng)
     cols, lo, n_op, restarts, settle = b, 0, 0, 0, 0
     pending = False  # V[:, cols - b: cols] is orthogonal to the last two blocks only
     tests = _TestSchedule(n)  # when to test convergence
     while True:
-        W = op(V[:, cols - b: cols])
+        W = op(V[:, cols - b : cols])
         n_op += b
-        slot = V[:, cols: cols + b] if cols + b <= m else None
+        slot = V[:, cols : cols + b] if cols + b <= m else None
         if pending:
             Q, C, R = _deferred_pass(W, V, H, cols, b, lo, inner, rng, out=slot)
             pending = False
         else:
-            local = _local_pass(W, V[:, lo: cols], inner, rng, out=slot) if lo > 0 else None
+            local = _local_pass(W, V[:, lo:cols], inner, rng, out=slot) if lo > 0 else None
             if local is None:
                 # first block after a (re)start (coupled to the whole basis), or a near
                 # breakdown: the full procedure now
@@ -308,7 +309,7 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
                     # orthogonal to the whole basis now
                     Q, C, R = _complete(Q, C, R, V[:, :cols], inner, rng, out=slot)
                     pending = False
-        H[:cols, cols - b: cols] = C
+        H[:cols, cols - b : cols] = C
         grow = False
         if cols >= k and (cols + b > m or tests.due(cols, n_op, b)):  # (a full basis: the restart needs S)
             theta, S, coupling = _ritz(H, cols, b, R)
@@ -320,32 +321,40 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
                 break
             tests.record(resid[:k] / bound, n_op, b)
         if cols + b <= m and not grow:
-            H[cols: cols + b, cols - b: cols] = R  # (Q is already V[:, cols: cols + b])
+            H[cols : cols + b, cols - b : cols] = R  # (Q is already V[:, cols: cols + b])
             lo = cols - b
             cols += b
             continue
         if restarts == maxiter:
-            logger.warning("Lanczos did not converge in %d restarts (residual %.1e)", maxiter,
-                           float(np.max(resid[:k] / np.abs(theta[:k]))))
+            logger.warning(
+                "Lanczos did not converge in %d restarts (residual %.1e)",
+                maxiter,
+                float(np.max(resid[:k] / np.abs(theta[:k]))),
+            )
             break
         restarts += 1
         if pending:  # the restart keeps Q: orthogonalize it fully first
             Q, C, R = _complete(Q, C, R, V[:, :cols], inner, rng, out=slot)
-            H[:cols, cols - b: cols] = C
+            H[:cols, cols - b : cols] = C
             pending = False
             theta, S, coupling = _ritz(H, cols, b, R)
         nb = max_block if grow else b
         q = min(max(p, k), m - nb, cols)
         _rotate(V, cols, S, q)
-        V[:, q: q + b] = Q  # (numpy buffers the copy if Q overlaps, as a view of V)
+        V[:, q : q + b] = Q  # (numpy buffers the copy if Q overlaps, as a view of V)
         H[:] = 0
         H[:q, :q] = np.diag(theta[:q])
-        H[q: q + b, :q] = coupling[:, :q]
+        H[q : q + b, :q] = coupling[:, :q]
         if grow:
-            logger.debug("Lanczos: block size %d -> %d after %d solves (cluster of %d equal Ritz values)",
-                         b, nb, n_op, b)
+            logger.debug(
+                "Lanczos: block size %d -> %d after %d solves (cluster of %d equal Ritz values)",
+                b,
+                nb,
+                n_op,
+                b,
+            )
             fresh = rng.standard_normal((n, nb - b)).astype(inner.dtype)
-            V[:, q + b: q + nb], _, _ = _orthonormalize(fresh, V[:, :q + b], inner, rng)
+            V[:, q + b : q + nb], _, _ = _orthonormalize(fresh, V[:, : q + b], inner, rng)
             settle = 2 * n_op
             b = nb
         cols, lo = q + b, 0
@@ -401,7 +410,7 @@ def _ritz(H, cols, b, R):
     ``R S_last`` to the next block (its column norms are the Ritz residuals)."""
     theta, S = scipy.linalg.eigh((H[:cols, :cols] + H[:cols, :cols].conj().T) / 2)
     theta, S = theta[::-1], np.asfortranarray(S[:, ::-1])
-    return theta, S, R @ S[cols - b: cols]
+    return theta, S, R @ S[cols - b : cols]
 
 
 def _sq_norms(C):
@@ -493,21 +502,21 @@ def _deferred_pass(W, V, H, cols, b, lo, inner: _Inner, rng, out=None):
     24: no measurable cost).
     """
     p = cols - b
-    W, Cl, G, breakdown = _against_last_blocks(W, V[:, lo: cols], inner)
+    W, Cl, G, breakdown = _against_last_blocks(W, V[:, lo:cols], inner)
     before = G.diagonal().real
     X = np.empty((W.shape[0], 2 * b), dtype=inner.dtype, order="F")
-    X[:, :b] = V[:, p: cols]
+    X[:, :b] = V[:, p:cols]
     X[:, b:] = W
     Vo = V[:, :p]
     D = inner.dot(Vo, X)
     X = inner.subtract(X, Vo, D)
     d1, d2 = D[:, :b], D[:, b:]
-    V[:, p: cols] = X[:, :b]
-    Hqo = H[p: cols, :p]
+    V[:, p:cols] = X[:, :b]
+    Hqo = H[p:cols, :p]
     H[:p, :p] += d1 @ Hqo
-    Cq = Cl[p - lo:]
+    Cq = Cl[p - lo :]
     C = np.zeros((cols, b), dtype=inner.dtype)
-    C[lo: p] = Cl[: p - lo]
+    C[lo:p] = Cl[: p - lo]
     C[:p] += d2 + d1 @ Cq - H[:p, :p] @ d1
     C[p:] = Cq - Hqo @ d1
     if breakdown or np.abs(d1).max() > _PENDING_DRIFT * inner.eps:
@@ -557,9 +566,9 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
     good_idx: list[int] = []
     sqrt_eps = np.sqrt(inner.eps)
     for j in range(m):
-        w = np.asfortranarray(op(V[:, j: j + 1]), dtype=inner.dtype)
+        w = np.asfortranarray(op(V[:, j : j + 1]), dtype=inner.dtype)
         lo = max(0, j - 1)
-        Vl = V[:, lo: j + 1]
+        Vl = V[:, lo : j + 1]
         c = inner.dot(Vl, w)
         w = inner.subtract(w, Vl, c)
         alpha[j] = c[-1, 0].real
@@ -570,25 +579,30 @@ def _smallest_pair(op, inner: _Inner, n, *, tol, maxiter, v0, ncv=None):
         resid = beta * np.abs(S[j])
         if resid[0] <= tol * abs(theta[0]):
             Y = inner.combine(V[:, : j + 1], S[:, :1])
-            return theta[:1], np.concatenate([Y, _harmonic_ritz(V, alpha, betas, j, w, beta, inner)], axis=1), j + 1
+            return (
+                theta[:1],
+                np.concatenate([Y, _harmonic_ritz(V, alpha, betas, j, w, beta, inner)], axis=1),
+                j + 1,
+            )
         if beta <= inner.eps * abs(theta[0]) or j + 1 == m:
             break
         # Ritz vectors that converged to sqrt(eps) join the selective orthogonalization set
-        new = [i for i in np.flatnonzero(resid <= sqrt_eps * abs(theta[0])) if i not in good_idx]
+        new = [int(i) for i in np.flatnonzero(resid <= sqrt_eps * abs(theta[0])) if i not in good_idx]
         if new:
             Y = inner.combine(V[:, : j + 1], S[:, new])
             good = np.asfortranarray(np.concatenate([good, Y], axis=1))
             good_idx += new  # Ritz pairs are tracked by rank (index 0: the leading pair)
             w = inner.subtract(w, Y, inner.dot(Y, w))
             beta = float(np.sqrt(max(inner.gram(w)[0, 0].real, 0.0)))
-        np.multiply(w, 1.0 / beta, out=V[:, j + 1: j + 2])
+        np.multiply(w, 1.0 / beta, out=V[:, j + 1 : j + 2])
         betas[j] = beta
     # not converged in m steps (or an invariant subspace): the robust general path, from
     # the best Ritz vectors so far
     ncol = min(3, S.shape[1])
     start = inner.combine(V[:, : S.shape[0]], S[:, :ncol])
-    theta, X, n_op = _lanczos(op, inner, n, 1, block=1, ncv=m, tol=tol, maxiter=maxiter, v0=start,
-                              keep=min(3, m // 2))
+    theta, X, n_op = _lanczos(
+        op, inner, n, 1, block=1, ncv=m, tol=tol, maxiter=maxiter, v0=start, keep=min(3, m // 2)
+    )
     return theta, X, n_op + S.shape[0]
 
 
@@ -625,7 +639,7 @@ def _better_of(Y, kmul, mmul=None):
     (``rho``: its Rayleigh quotient), as an ``(n, 1)`` block, and its image ``K y``."""
     best = None
     for i in range(Y.shape[1]):
-        y = Y[:, i: i + 1]
+        y = Y[:, i : i + 1]
         ky = kmul(y)
         my = y if mmul is None else mmul(y)
         rho = np.vdot(y, ky).real / np.vdot(y, my).real
@@ -672,7 +686,6 @@ def fix_phase(X: np.ndarray) -> np.ndarray:
 def eig_dense(A, M, k):
     lam, X = scipy.linalg.eigh(A.toarray(), M.toarray(), subset_by_index=[0, k - 1])
     return lam, X
-
 
 
 def _diagonal(M: sp.spmatrix):
@@ -775,9 +788,18 @@ def shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
     else:
         KY = None
         block, max_block = (block_size, block_size) if block_size else (min(k, 2), min(k, _MAX_BLOCK))
-        _, Y, n_op = _lanczos(op, inner, n, k, block=block, max_block=max_block,
-                              ncv=ncv or max(3 * k, 2 * k + 2 * max_block), tol=tol, maxiter=maxiter,
-                              v0=start)
+        _, Y, n_op = _lanczos(
+            op,
+            inner,
+            n,
+            k,
+            block=block,
+            max_block=max_block,
+            ncv=ncv or max(3 * k, 2 * k + 2 * max_block),
+            tol=tol,
+            maxiter=maxiter,
+            v0=start,
+        )
     logger.debug("Lanczos: %d solves for k=%d", n_op, k)
     if s is None:
         return (*_rayleigh_ritz(A, M, Y), factor)
@@ -790,5 +812,3 @@ def shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
     X = inner.gemm(1.0, Y, C)
     X /= s[:, None]
     return lam, X, factor
-
-

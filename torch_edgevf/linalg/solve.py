@@ -109,7 +109,7 @@ def solve(
     return _Solve.apply(solver.data.values, b, solver, adjoint)
 
 
-def _restrict(data: SparseData, rows: torch.Tensor, cols: torch.Tensor):
+def _restrict(data: SparseData, rows: torch.Tensor, cols: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Block ``A[rows][:, cols]``: ``(indices (2, nnz'), values (nnz',))``, values differentiable."""
     new_row = torch.full((data.n,), -1, dtype=torch.long, device=data.indices.device)
     new_col = new_row.clone()
@@ -174,9 +174,7 @@ def solve_fixed(
     fixed = _check_index(fixed_idx, data.n, "fixed_idx")
     check_finite(fixed_values, "fixed_values")
     if fixed_values.shape[0] != fixed.numel():
-        raise ValueError(
-            f"fixed_values has {fixed_values.shape[0]} rows but fixed_idx has {fixed.numel()}"
-        )
+        raise ValueError(f"fixed_values has {fixed_values.shape[0]} rows but fixed_idx has {fixed.numel()}")
     is_free = torch.ones(data.n, dtype=torch.bool, device=fixed.device)
     is_free[fixed] = False
     free = torch.nonzero(is_free).squeeze(1)
@@ -184,7 +182,8 @@ def solve_fixed(
     xc = fixed_values.to(dtype)
     if b.dim() == 2 and xc.dim() == 1:
         xc = xc[:, None].expand(-1, b.shape[1])
-    rhs = b.to(dtype)[free] - _block_matmul(*_restrict(data, free, fixed), xc, free.numel())
+    fc_idx, fc_val = _restrict(data, free, fixed)
+    rhs = b.to(dtype)[free] - _block_matmul(fc_idx, fc_val, xc, free.numel())
     ff_idx, ff_val = _restrict(data, free, free)
     a_ff = torch.sparse_coo_tensor(ff_idx, ff_val, (free.numel(), free.numel()), is_coalesced=True)
     x_f = solve(a_ff, rhs, method=method)
@@ -230,14 +229,16 @@ def solve_constrained(
     m = int(Cs.shape[0])
     if d.shape[:1] != (m,) or d.dim() != b.dim():
         raise ValueError(f"d must have shape ({m},) or ({m}, K) like b, got {tuple(d.shape)}")
-    dtype = torch.promote_types(torch.promote_types(data.dtype, Cs.dtype), torch.promote_types(b.dtype, d.dtype))
+    dtype = torch.promote_types(
+        torch.promote_types(data.dtype, Cs.dtype), torch.promote_types(b.dtype, d.dtype)
+    )
     ci, cv = Cs.indices(), Cs.values().to(dtype)
     shift = torch.tensor([[data.n], [0]], device=ci.device)
     idx = torch.cat([data.indices, ci + shift, ci.flip(0) + shift.flip(0)], dim=1)
     vals = torch.cat([data.values.to(dtype), cv, cv.conj()])
     kkt = torch.sparse_coo_tensor(idx, vals, (data.n + m, data.n + m))
     sol = solve(kkt, torch.cat([b.to(dtype), d.to(dtype)]), method="lu")
-    x, mu = sol[: data.n], sol[data.n:]
+    x, mu = sol[: data.n], sol[data.n :]
     return (x, mu) if return_multipliers else x
 
 

@@ -9,16 +9,47 @@ __all__ = ["icosphere", "grid", "sphere_delaunay", "ellipsoid", "cylinder"]
 
 
 def _icosahedron() -> tuple[np.ndarray, np.ndarray]:
-    t = (1 + 5 ** 0.5) / 2
+    t = (1 + 5**0.5) / 2
     v = np.array(
-        [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]],
+        [
+            [-1, t, 0],
+            [1, t, 0],
+            [-1, -t, 0],
+            [1, -t, 0],
+            [0, -1, t],
+            [0, 1, t],
+            [0, -1, -t],
+            [0, 1, -t],
+            [t, 0, -1],
+            [t, 0, 1],
+            [-t, 0, -1],
+            [-t, 0, 1],
+        ],
         dtype=np.float64,
     )
     f = np.array(
-        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
-         [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
-         [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]],
+        [
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ],
         dtype=np.int64,
     )
     return v / np.linalg.norm(v, axis=1, keepdims=True), f
@@ -33,10 +64,15 @@ def _subdivide(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     keys, inv = np.unique(pairs[:, 0] * nv + pairs[:, 1], return_inverse=True)
     mid = (v[keys // nv] + v[keys % nv]) / 2
     mid /= np.linalg.norm(mid, axis=1, keepdims=True)
-    m = (inv.reshape(-1, 3) + nv)
+    m = inv.reshape(-1, 3) + nv
     ma, mb, mc = m[:, 0], m[:, 1], m[:, 2]  # midpoints opposite a, b, c
     faces = np.concatenate(
-        [np.stack([a, mc, mb], 1), np.stack([b, ma, mc], 1), np.stack([c, mb, ma], 1), np.stack([ma, mb, mc], 1)]
+        [
+            np.stack([a, mc, mb], 1),
+            np.stack([b, ma, mc], 1),
+            np.stack([c, mb, ma], 1),
+            np.stack([ma, mb, mc], 1),
+        ]
     )
     return np.concatenate([v, mid]), faces
 
@@ -76,8 +112,10 @@ def grid(nx: int = 8, ny: int = 8, size=(1.0, 1.0), dtype: torch.dtype = torch.f
 
 
 def _outward(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Orient the faces of a convex hull outwards: normals away from an interior point."""
     n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    flip = (n * v[f].mean(1)).sum(1) < 0
+    inside = v[np.unique(f)].mean(0)  # the mean of the hull's vertices (the origin may lie outside)
+    flip = (n * (v[f].mean(1) - inside)).sum(1) < 0
     f = f.copy()
     f[flip] = f[flip][:, [0, 2, 1]]
     return f
@@ -100,8 +138,13 @@ def ellipsoid(axes=(1.0, 0.7, 0.5), level: int = 3, dtype: torch.dtype = torch.f
     return v * torch.tensor(axes, dtype=dtype), f
 
 
-def cylinder(radius: float = 1.0, height: float = 2.0, n_around: int = 32, n_along: int = 16,
-             dtype: torch.dtype = torch.float64):
+def cylinder(
+    radius: float = 1.0,
+    height: float = 2.0,
+    n_around: int = 32,
+    n_along: int = 16,
+    dtype: torch.dtype = torch.float64,
+):
     """An open cylinder around the z axis (two boundary loops), outward oriented."""
     theta = np.linspace(0, 2 * np.pi, n_around, endpoint=False)
     z = np.linspace(-height / 2, height / 2, n_along + 1)

@@ -18,8 +18,16 @@ import torch
 from ..linalg import sparse_matrix
 from ..mesh.topology import unique_pairs
 
-__all__ = ["Pattern", "EdgePairPattern", "EdgeVertexPattern", "VertexPairPattern", "sparse_coo", "diagonal",
-           "symmetric_layout", "index_dtype"]
+__all__ = [
+    "Pattern",
+    "EdgePairPattern",
+    "EdgeVertexPattern",
+    "VertexPairPattern",
+    "sparse_coo",
+    "diagonal",
+    "symmetric_layout",
+    "index_dtype",
+]
 
 
 def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tensor:
@@ -30,9 +38,7 @@ def sparse_coo(indices: torch.Tensor, values: torch.Tensor, shape) -> torch.Tens
     """
     if values.requires_grad and torch.is_grad_enabled():
         return sparse_matrix(indices, values, (int(shape[0]), int(shape[1])), assume_sorted=True)
-    return torch.sparse_coo_tensor(
-        indices, values, tuple(shape), is_coalesced=True, check_invariants=False
-    )
+    return torch.sparse_coo_tensor(indices, values, tuple(shape), is_coalesced=True, check_invariants=False)
 
 
 def diagonal(values: torch.Tensor) -> torch.Tensor:
@@ -44,6 +50,9 @@ def diagonal(values: torch.Tensor) -> torch.Tensor:
 class _OnDevice:
     """A fixed sparsity pattern: index tensors kept on the CPU and copied once to each other
     device they are used on."""
+
+    _indices: torch.Tensor
+    num_contributions: int
 
     @property
     def indices(self) -> torch.Tensor:
@@ -188,7 +197,9 @@ class EdgePairPattern(_OnDevice):
         # diagonal: the face-major corner of each side of every edge, 3F (a zero) if none
         diag_src = sc if closed else np.where(sc >= 0, sc, 3 * nf)
         self._diag = tuple(
-            torch.from_numpy(np.ascontiguousarray(diag_src[:, side]).astype(index_dtype(3 * nf + 1), copy=False))
+            torch.from_numpy(
+                np.ascontiguousarray(diag_src[:, side]).astype(index_dtype(3 * nf + 1), copy=False)
+            )
             for side in (0, 1)
         )
 
@@ -202,6 +213,7 @@ class EdgePairPattern(_OnDevice):
         ``k``); columns are written straight into the value buffer. ``lower=None`` means
         ``conj(upper)``: a Hermitian operator (``upper`` itself for a real one).
         """
+
         def columns(t):
             return None if t is None else list(t) if isinstance(t, (list, tuple)) else list(t.unbind(1))
 
@@ -224,7 +236,7 @@ class EdgePairPattern(_OnDevice):
         else:  # one buffer, filled column by column: no concatenation, no stacked or conjugated copy
             values = torch.empty(ne + 6 * nf, dtype=dtype, device=device)
             values[:ne] = on_diag
-            up, low = values[ne:ne + 3 * nf], values[ne + 3 * nf:]
+            up, low = values[ne : ne + 3 * nf], values[ne + 3 * nf :]
             for cols, out in ((up_cols, up), (low_cols, low)):
                 for k, col in enumerate(cols or []):
                     out.view(nf, 3)[:, k] = col
@@ -408,8 +420,9 @@ class VertexPairPattern(_OnDevice):
         ij, ji = term(nxt, prv), term(prv, nxt)
         index = index_dtype(9 * nf + 1)
         # [upper (i, j) | lower (j, i)] entries, each the sum of a term of each face
-        self._pairs = _first_and_rest(np.concatenate([ij[:, 0], ji[:, 0]]), np.concatenate([ji[:, 1], ij[:, 1]]),
-                                      none, index)
+        self._pairs = _first_and_rest(
+            np.concatenate([ij[:, 0], ji[:, 0]]), np.concatenate([ji[:, 1], ij[:, 1]]), none, index
+        )
         corners = f.ravel()
         self._diag_rows = torch.from_numpy(corners.astype(index))
         corner = np.arange(3 * nf)
