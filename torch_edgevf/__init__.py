@@ -77,7 +77,7 @@ if TYPE_CHECKING:  # the same names, eagerly, for type checkers and editors
         vertex_normals,
     )
     from .mesh.meshes import icosphere
-from .mesh.repair import RepairReport, RepairResult, repair
+    from .mesh.repair import RepairReport, RepairResult, repair
     from .mesh.topology import Topology, remove_unreferenced_vertices
     from .operators import module
     from .operators.functional import (
@@ -176,6 +176,9 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "transport_coefficients": (".mesh.geometry", "transport_coefficients"),
     "vertex_normals": (".mesh.geometry", "vertex_normals"),
     "icosphere": (".mesh.meshes", "icosphere"),
+    "repair": (".mesh.repair", "repair"),
+    "RepairResult": (".mesh.repair", "RepairResult"),
+    "RepairReport": (".mesh.repair", "RepairReport"),
     "Topology": (".mesh.topology", "Topology"),
     "remove_unreferenced_vertices": (".mesh.topology", "remove_unreferenced_vertices"),
     "module": (".operators.module", None),

@@ -65,7 +65,7 @@ import torch
 from .._dtypes import complex_dtype
 from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, list_some
 from ..linalg import SparseSolver, eigsh, expm_multiply, solve
-from ..mesh.geometry import dihedral_angles, edge_lengths, face_geometry
+from ..mesh.geometry import FaceGeometry, dihedral_angles, edge_lengths, face_geometry
 from ..mesh.topology import Topology
 from ..operators import functional as ops
 from ..operators import kernels
@@ -94,7 +94,11 @@ def _check_real(x, name: str, minimum: float | None = None) -> float:
         if x.numel() != 1:
             raise ValueError(f"{name} must be a real number, got a tensor of shape {tuple(x.shape)}")
         x = x.item()
-    if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)) or not math.isfinite(x):
+    if (
+        isinstance(x, bool)
+        or not isinstance(x, (int, float, np.integer, np.floating))
+        or not math.isfinite(x)
+    ):
         raise ValueError(f"{name} must be a finite real number, got {x!r}")
     if minimum is not None and x < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {x!r}")
@@ -106,7 +110,9 @@ class FieldDesigner:
 
     Parameters
     ----------
-    verts : (V, 3) float tensor
+    verts : (V, 3) float tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry`
+        (intrinsic: from edge lengths, e.g. of a repaired mesh; the curvature methods then
+        need positions and are not available)
     faces : (F, 3) integer tensor, or a :class:`~torch_edgevf.mesh.topology.Topology`
     n : int >= 1
         Symmetry order: the designed ``z`` are representation vectors of ``n``-direction
@@ -130,17 +136,25 @@ class FieldDesigner:
 
     def __init__(self, verts, faces, n: int = 1):
         self.n = check_n(n)
-        verts = as_verts(verts)
-        topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
-        check_vertex_count(verts, topo.num_vertices)
+        if isinstance(verts, FaceGeometry):  # intrinsic: lengths only (no curvature alignment)
+            topo = kernels.intrinsic_topology(verts, faces)
+            geom = verts
+            per_edge = geom.lengths.new_zeros(topo.num_edges).index_put(
+                (topo.face_edges.to(geom.device).flatten(),), geom.lengths.flatten()
+            )
+            self.mean_edge_length = per_edge.mean()
+        else:
+            verts = as_verts(verts)
+            topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
+            check_vertex_count(verts, topo.num_vertices)
+            geom = face_geometry(verts, topo)
+            self.mean_edge_length = edge_lengths(verts, topo).mean()
         self.topology = topo
         self.verts = verts
-        geom = face_geometry(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         self._geom, self._signs = geom, signs
         self.mass = kernels.mass_values(geom, topo)
         self.laplacian = self._laplacian(self.n)
-        self.mean_edge_length = edge_lengths(verts, topo).mean()
         self._solvers: dict = {}
         self._real_laplacian = None
 
@@ -248,8 +262,17 @@ class FieldDesigner:
 
     # ------------------------------------------------------------------ constraints (3.4)
 
-    def constrained(self, edges=None, values=None, direction_edges=None, directions=None,
-                    guide=None, lam: float = 0.0, mu_curl: float = 0.0, mu_div: float = 0.0):
+    def constrained(
+        self,
+        edges=None,
+        values=None,
+        direction_edges=None,
+        directions=None,
+        guide=None,
+        lam: float = 0.0,
+        mu_curl: float = 0.0,
+        mu_div: float = 0.0,
+    ):
         """The smoothest field under hard constraints, optionally with a soft guide (3.4).
 
         Minimises ``x^T (A - lam M) x - 2 x^T M w`` (``A = real_form(L_c) + mu_curl L_curl +
@@ -309,7 +332,7 @@ class FieldDesigner:
         red_rows, red_cols = col_of[r[keep]], col_of[c[keep]]
         pattern = Pattern(red_rows.cpu().numpy(), red_cols.cpu().numpy(), (m, m))
         a_red = pattern.assemble(red_vals)
-        m_red = torch.zeros(m, dtype=dtype, device=idx.device).index_add(0, p_col, m2[p_row] * p_val ** 2)
+        m_red = torch.zeros(m, dtype=dtype, device=idx.device).index_add(0, p_col, m2[p_row] * p_val**2)
 
         homogeneous = guide is None and not plan["has_values"]
         if homogeneous:
@@ -339,8 +362,9 @@ class FieldDesigner:
     def _constraint_plan(self, edges, values, direction_edges, directions) -> dict:
         ne, dtype, dev = self.num_edges, self.verts.dtype, self.verts.device
         e_val, v_val = _check_pairs(edges, values, ne, "edges", "values", self.complex_dtype, dev)
-        e_dir, w_dir = _check_pairs(direction_edges, directions, ne, "direction_edges", "directions",
-                                    self.complex_dtype, dev)
+        e_dir, w_dir = _check_pairs(
+            direction_edges, directions, ne, "direction_edges", "directions", self.complex_dtype, dev
+        )
         e_val, v_val = _dedupe(e_val, v_val, "values")
         e_dir, w_dir = _dedupe(e_dir, w_dir, "directions", parallel=True)
         zero = torch.nonzero(w_dir.detach().abs() == 0).flatten().tolist()
@@ -362,20 +386,30 @@ class FieldDesigner:
         nf, nd = free.numel(), e_dir.numel()
         m = 2 * nf + nd
         if m == 0:
-            raise ValueError(
-                f"the constraints fix all {ne} edges: no free unknown is left to design"
-            )
+            raise ValueError(f"the constraints fix all {ne} edges: no free unknown is left to design")
         ar_f = torch.arange(nf, device=dev)
         ar_d = torch.arange(nd, device=dev) + 2 * nf
         unit = w_dir / w_dir.abs()
         rows = torch.cat([free, free + ne, e_dir, e_dir + ne])
         cols = torch.cat([ar_f, ar_f + nf, ar_d, ar_d])
-        coef = torch.cat([torch.ones(2 * nf, dtype=dtype, device=dev), unit.real.to(dtype), unit.imag.to(dtype)])
+        coef = torch.cat(
+            [torch.ones(2 * nf, dtype=dtype, device=dev), unit.real.to(dtype), unit.imag.to(dtype)]
+        )
         x_fixed = torch.zeros(2 * ne, dtype=dtype, device=dev)
         if e_val.numel():
-            x_fixed = x_fixed.index_put((e_val,), v_val.real.to(dtype)).index_put((e_val + ne,), v_val.imag.to(dtype))
-        return {"rows": rows, "cols": cols, "coef": coef, "x_fixed": x_fixed, "m": m,
-                "has_values": bool(e_val.numel()), "direction_edges": e_dir, "direction_units": unit}
+            x_fixed = x_fixed.index_put((e_val,), v_val.real.to(dtype)).index_put(
+                (e_val + ne,), v_val.imag.to(dtype)
+            )
+        return {
+            "rows": rows,
+            "cols": cols,
+            "coef": coef,
+            "x_fixed": x_fixed,
+            "m": m,
+            "has_values": bool(e_val.numel()),
+            "direction_edges": e_dir,
+            "direction_units": unit,
+        }
 
     # ------------------------------------------------------------------ soft alignment (3.4)
 
@@ -409,7 +443,8 @@ class FieldDesigner:
         if solver.backend == "superlu":  # the Cholesky path failed: not positive definite
             log.warning(
                 "lam = %g is not below the first eigenvalue: L_c - lam M_z is indefinite and the "
-                "result is a stationary point of the energy, not its minimiser", lam
+                "result is a stationary point of the energy, not its minimiser",
+                lam,
             )
         return solver.solve(self.mass * w)
 
@@ -450,7 +485,7 @@ class FieldDesigner:
         z = self._field(z0, "z0")
         if t == 0:
             return z
-        return self._diffuse(z, t * self.mean_edge_length ** 2, method, steps)
+        return self._diffuse(z, t * self.mean_edge_length**2, method, steps)
 
     def _diffuse(self, z: torch.Tensor, t_phys: torch.Tensor, method: str, steps: int) -> torch.Tensor:
         """Diffusion for the physical time ``t_phys`` (a tensor: differentiable in ``verts``)."""
@@ -520,7 +555,7 @@ class FieldDesigner:
             radius = torch.sqrt(self._geom.area.sum() / (4 * math.pi))
             t_phys = self.mean_edge_length * radius / 10
         else:
-            t_phys = _check_real(diffusion_time, "diffusion_time", 0.0) * self.mean_edge_length ** 2
+            t_phys = _check_real(diffusion_time, "diffusion_time", 0.0) * self.mean_edge_length**2
         beta = dihedral_angles(self.verts, self.topology)
         length = edge_lengths(self.verts, self.topology)
         if weighting == "integrated":
@@ -532,14 +567,15 @@ class FieldDesigner:
             z2 = designer2._diffuse(z2, t_phys, "implicit", 4)
         return z2 if self.n == 2 else nth_power(z2, self.n // 2)
 
-    def _companion(self, n: int) -> "FieldDesigner":
+    def _companion(self, n: int) -> FieldDesigner:
         key = ("companion", n)
         if key not in self._solvers:
             self._solvers[key] = FieldDesigner(self.verts, self.topology, n)
         return self._solvers[key]
 
-    def curvature_aligned(self, lam: float = 0.0, diffusion_time: float | None = None,
-                          weighting: str = "integrated") -> torch.Tensor:
+    def curvature_aligned(
+        self, lam: float = 0.0, diffusion_time: float | None = None, weighting: str = "integrated"
+    ) -> torch.Tensor:
         """The field softly aligned (:meth:`aligned`) to :meth:`curvature` (thesis 3.4).
 
         Returns
@@ -580,9 +616,7 @@ def _check_pairs(edges, values, ne: int, e_name: str, v_name: str, cdtype, dev):
     edges = edges.to(torch.int64).reshape(-1)
     bad = torch.nonzero((edges < 0) | (edges >= ne)).flatten()
     if bad.numel():
-        raise ValueError(
-            f"{e_name} out of range (the mesh has {ne} edges): {list_some(edges[bad].tolist())}"
-        )
+        raise ValueError(f"{e_name} out of range (the mesh has {ne} edges): {list_some(edges[bad].tolist())}")
     values = _as_complex(torch.as_tensor(values, device=dev), v_name)
     if values.shape != edges.shape:
         raise ValueError(
@@ -613,9 +647,7 @@ def _dedupe(edges: torch.Tensor, values: torch.Tensor, name: str, parallel: bool
         clash = (ref - v).abs() > 1e-12 * (ref.abs() + v.abs() + 1e-300)
     if bool(clash.any()):
         bad = torch.unique(edges[clash]).tolist()
-        raise ValueError(
-            f"contradictory constraints: edges given two different {name} [{list_some(bad)}]"
-        )
+        raise ValueError(f"contradictory constraints: edges given two different {name} [{list_some(bad)}]")
     return edges[first], values[first]
 
 
@@ -631,7 +663,7 @@ def smoothest_field(verts, faces, n: int = 1) -> torch.Tensor:
 
     Parameters
     ----------
-    verts : (V, 3) float tensor
+    verts : (V, 3) float tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry`
     faces : (F, 3) integer tensor or Topology
     n : int >= 1
 
@@ -655,8 +687,9 @@ def div_free_field(verts, faces, mu: float = 1.0, n: int = 1) -> torch.Tensor:
     return FieldDesigner(verts, faces, n).div_free(mu)
 
 
-def constrained_field(verts, faces, edges=None, values=None, direction_edges=None, directions=None,
-                      n: int = 1, **kwargs) -> torch.Tensor:
+def constrained_field(
+    verts, faces, edges=None, values=None, direction_edges=None, directions=None, n: int = 1, **kwargs
+) -> torch.Tensor:
     """The smoothest field under hard value and direction constraints (thesis 3.4); see
     :meth:`FieldDesigner.constrained`."""
     return FieldDesigner(verts, faces, n).constrained(edges, values, direction_edges, directions, **kwargs)
@@ -668,22 +701,30 @@ def aligned_field(verts, faces, guide, lam: float = 0.0, n: int = 1) -> torch.Te
     return FieldDesigner(verts, faces, n).aligned(guide, lam)
 
 
-def heat_diffuse(verts, faces, z0, t: float, n: int = 1, method: str = "exponential",
-                 steps: int = 1) -> torch.Tensor:
+def heat_diffuse(
+    verts, faces, z0, t: float, n: int = 1, method: str = "exponential", steps: int = 1
+) -> torch.Tensor:
     """Heat diffusion of an ``n``-field for time ``t h^2`` (thesis 3.2); see
     :meth:`FieldDesigner.diffuse`."""
     return FieldDesigner(verts, faces, n).diffuse(z0, t, method, steps)
 
 
-def curvature_field(verts, faces, n: int = 2, diffusion_time: float | None = None,
-                    weighting: str = "integrated") -> torch.Tensor:
+def curvature_field(
+    verts, faces, n: int = 2, diffusion_time: float | None = None, weighting: str = "integrated"
+) -> torch.Tensor:
     """The curvature line field (``n = 2``) or cross field (``n = 4``) representation
     vector (thesis 3.4); see :meth:`FieldDesigner.curvature`."""
     return FieldDesigner(verts, faces, n).curvature(diffusion_time, weighting)
 
 
-def curvature_aligned_field(verts, faces, n: int = 4, lam: float = 0.0, diffusion_time: float | None = None,
-                            weighting: str = "integrated") -> torch.Tensor:
+def curvature_aligned_field(
+    verts,
+    faces,
+    n: int = 4,
+    lam: float = 0.0,
+    diffusion_time: float | None = None,
+    weighting: str = "integrated",
+) -> torch.Tensor:
     """The smooth ``n``-field softly aligned to the curvature directions (thesis 3.4); see
     :meth:`FieldDesigner.curvature_aligned`."""
     return FieldDesigner(verts, faces, n).curvature_aligned(lam, diffusion_time, weighting)

@@ -76,8 +76,48 @@ class FaceGeometry:
         """(F, 3) ``cot(alpha_k) = d_k / (2A)``."""
         return self.dots / self.double_area[:, None]
 
+    @property
+    def dtype(self) -> torch.dtype:
+        """The real dtype of the quantities (so a geometry can stand in for positions)."""
+        return self.lengths.dtype
+
+    @property
+    def device(self) -> torch.device:
+        return self.lengths.device
+
+    @property
+    def num_faces(self) -> int:
+        return self.lengths.shape[0]
+
     @classmethod
-    def from_lengths(cls, lengths: torch.Tensor) -> "FaceGeometry":
+    def from_edge_lengths(cls, lengths: torch.Tensor, topo: Topology) -> FaceGeometry:
+        """Build from one length per edge of ``topo`` (in the order of ``topo.edges``).
+
+        The intrinsic path for meshes whose positions cannot be trusted, e.g. the mollified
+        lengths of :func:`torch_edgevf.mesh.repair.repair`; differentiable in ``lengths``.
+        The operators, :class:`~torch_edgevf.fields.design.FieldDesigner` and
+        :func:`~torch_edgevf.fields.singularities.singularities` accept the result in place
+        of vertex positions.
+
+        Parameters
+        ----------
+        lengths : (E,) floating tensor
+        topo : :class:`Topology`
+        """
+        if not isinstance(topo, Topology):
+            raise ValueError(f"topo must be a Topology, got {type(topo).__name__}")
+        if not isinstance(lengths, torch.Tensor) or lengths.dim() != 1 or lengths.shape[0] != topo.num_edges:
+            shape = tuple(lengths.shape) if isinstance(lengths, torch.Tensor) else type(lengths).__name__
+            raise ValueError(f"lengths must be an (E,) tensor with E = {topo.num_edges}, got {shape}")
+        if not lengths.is_floating_point():
+            raise ValueError(f"lengths must have a floating dtype, got {lengths.dtype}")
+        if not bool(torch.isfinite(lengths.detach()).all()):
+            bad = torch.nonzero(~torch.isfinite(lengths.detach())).flatten().tolist()
+            raise ValueError(f"lengths has NaN or Inf values at edges [{list_some(bad)}]")
+        return cls.from_lengths(lengths[topo.face_edges.to(lengths.device)])
+
+    @classmethod
+    def from_lengths(cls, lengths: torch.Tensor) -> FaceGeometry:
         """Build from edge lengths alone (intrinsic meshes).
 
         The area uses Kahan's cancellation-free form of Heron's formula.
@@ -117,7 +157,9 @@ def _checked(geom: FaceGeometry) -> FaceGeometry:
 #: was computed from: a memo of :func:`face_geometry` for repeated calls on the same
 #: positions (e.g. several operators of one mesh). Held beside the topology, not on it,
 #: and dropped with it.
-_LAST_GEOMETRY: weakref.WeakKeyDictionary[Topology, tuple[torch.Tensor, FaceGeometry]] = weakref.WeakKeyDictionary()
+_LAST_GEOMETRY: weakref.WeakKeyDictionary[Topology, tuple[torch.Tensor, FaceGeometry]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 def face_geometry(verts, faces) -> FaceGeometry:
@@ -142,9 +184,9 @@ def face_geometry(verts, faces) -> FaceGeometry:
     verts = as_verts(verts)
     # Without autograd, the last geometry of a topology is reused for equal positions
     # (compared by value, so in-place edits of any kind are seen).
-    cacheable = topo is not None and not (torch.is_grad_enabled() and verts.requires_grad)
-    if cacheable:
-        cached = _LAST_GEOMETRY.get(topo)
+    memo = topo if topo is not None and not (torch.is_grad_enabled() and verts.requires_grad) else None
+    if memo is not None:
+        cached = _LAST_GEOMETRY.get(memo)
         if cached is not None and _same_values(cached[0], verts):
             return cached[1]
     if topo is not None and verts.shape[0] >= topo.num_vertices:
@@ -175,8 +217,8 @@ def face_geometry(verts, faces) -> FaceGeometry:
     # vectors leaving corner k: towards k+1 is -e_{k+2}, towards k+2 is e_{k+1}
     dots = -torch.stack([dot(2, 1), dot(0, 2), dot(1, 0)])
     geom = _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
-    if cacheable:
-        _LAST_GEOMETRY[topo] = (verts.detach().clone(), geom)
+    if memo is not None:
+        _LAST_GEOMETRY[memo] = (verts.detach().clone(), geom)
     return geom
 
 

@@ -5,20 +5,27 @@ float64; gradients flow back to them) and a :class:`~torch_edgevf.mesh.topology.
 faces array, from which one is built). The sparsity patterns are computed once per
 topology and cached on it; re-assembly for new positions is a gather and a scatter.
 
+Where positions cannot be trusted (zero-area faces, or a mesh known only by its edge
+lengths), pass a :class:`~torch_edgevf.mesh.geometry.FaceGeometry` in place of ``verts``,
+e.g. ``FaceGeometry.from_edge_lengths(lengths, topo)`` or the mollified
+``repair(verts, faces).geometry``: every operator depends only on edge lengths, corner
+angles and the transport between the edges of a face, which is the corner angle, so all of
+them are intrinsic, and differentiable in the lengths.
+
 Per face, with corners ``a, b`` and third corner ``c``, lengths ``l`` of the opposite
 edges, area ``A``, signs ``delta`` and transport ``r_ab`` (:func:`transport_coefficients`):
 
-==========================  ==============================================================
-operator                    contribution of one face
-==========================  ==============================================================
-``M_z``  (E, E)             ``(M_z)_aa += A / 3``                                (3.1, A.2)
-``L_c^(n)``  (E, E)         ``(L)_aa += l_a^2 / A``, ``(L)_ab += -l_a l_b cos(alpha_c) / A * r_ba^n``  (3.1, A.3)
-``G``  (E, V)               ``G[e_a, v_b] += i delta_b l_b / 6 * r_ba``  (``r_aa = 1``)  (4.2, A.4)
-``K``  (F, E)               ``K[f, e_a] = delta_a l_a``                                (3.3)
-``D_w``  (E, E)             ``(D)_ab += -delta_b l_b / 3 * Im(w_a r_ab) * r_ba``  (5.1, A.5)
-``M_v`` full  (V, V)        ``A / 6`` on the diagonal, ``A / 12`` off it
-``L``  (V, V)               ``G^H M_z^{-1} G`` (real)                                  (4.2)
-==========================  ==============================================================
+=====================  ===================================================================================
+operator               contribution of one face
+=====================  ===================================================================================
+``M_z``  (E, E)        ``(M_z)_aa += A / 3``                                                     (3.1, A.2)
+``L_c^(n)``  (E, E)    ``(L)_aa += l_a^2 / A``, ``(L)_ab += -l_a l_b cos(alpha_c) / A * r_ba^n`` (3.1, A.3)
+``G``  (E, V)          ``G[e_a, v_b] += i delta_b l_b / 6 * r_ba``  (``r_aa = 1``)               (4.2, A.4)
+``K``  (F, E)          ``K[f, e_a] = delta_a l_a``                                               (3.3)
+``D_w``  (E, E)        ``(D)_ab += -delta_b l_b / 3 * Im(w_a r_ab) * r_ba``                      (5.1, A.5)
+``M_v`` full  (V, V)   ``A / 6`` on the diagonal, ``A / 12`` off it
+``L``  (V, V)          ``G^H M_z^{-1} G`` (real)                                                 (4.2)
+=====================  ===================================================================================
 """
 
 from __future__ import annotations
@@ -27,7 +34,6 @@ import torch
 
 from .._validation import as_edge_field, check_n
 from ..mesh.geometry import OFF_DIAGONAL, PAIR_A, PAIR_B, PAIR_C, pair_columns
-from .patterns import diagonal
 from .kernels import (
     cached_pattern,
     connection_laplacian_from,
@@ -41,6 +47,7 @@ from .kernels import (
     prepare,
     vertex_mass_from,
 )
+from .patterns import diagonal
 
 __all__ = [
     "mass_matrix",
@@ -139,7 +146,7 @@ def _face_circulation(verts, topo, z) -> tuple[torch.Tensor, torch.Tensor, torch
     verts, topo, geom, signs = prepare(verts, topo)
     z = as_edge_field(z, topo, verts)
     fe = topo.face_edges.to(verts.device)
-    weights = (signs * geom.lengths)
+    weights = signs * geom.lengths
     zf = z[fe]  # (F, 3) or (F, 3, C)
     if z.dim() == 2:
         weights = weights[..., None]
@@ -286,4 +293,3 @@ def cotan_laplacian(verts, topo) -> torch.Tensor:
     diag = 0.5 * (cot.sum(1, keepdim=True) - pair_columns(cot, "a"))
     vals = torch.where(off, -0.5 * pair_columns(cot, "c"), diag)
     return cached_pattern(topo, "VV").assemble(vals.flatten())
-

@@ -11,14 +11,16 @@ The formulas are those of the table in :mod:`torch_edgevf.operators`.
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 import numpy as np
 import torch
 
 from ..mesh.geometry import (
     OFF_DIAGONAL,
     FaceGeometry,
-    int_power,
     face_geometry,
+    int_power,
     pair_columns,
     pair_transport,
     topology_and_verts,
@@ -35,7 +37,6 @@ from .patterns import (
     symmetric_layout,
 )
 
-
 _PATTERN_KEYS: dict[str, DerivedKey] = {
     "EE": "pattern.EE",
     "EV": "pattern.EV",
@@ -44,8 +45,24 @@ _PATTERN_KEYS: dict[str, DerivedKey] = {
 }
 
 
-def cached_pattern(topo: Topology, name: str) -> Pattern:
-    """The cached sparsity pattern ``name`` of ``topo`` (built on first use)."""
+@overload
+def cached_pattern(topo: Topology, name: Literal["EE"]) -> EdgePairPattern: ...
+@overload
+def cached_pattern(topo: Topology, name: Literal["EV"]) -> EdgeVertexPattern: ...
+@overload
+def cached_pattern(topo: Topology, name: Literal["VV"]) -> VertexPairPattern: ...
+@overload
+def cached_pattern(topo: Topology, name: Literal["FE"]) -> Pattern: ...
+
+
+def cached_pattern(
+    topo: Topology, name: str
+) -> Pattern | EdgePairPattern | EdgeVertexPattern | VertexPairPattern:
+    """The cached sparsity pattern ``name`` of ``topo`` (built on first use).
+
+    ``"EE"`` (E, E) edge pairs of a face, ``"EV"`` (E, V) edge and corner, ``"VV"`` (V, V)
+    corner pairs, ``"FE"`` (F, E) face and edge.
+    """
 
     def build():
         f, fe = topo.compact_faces(), topo.compact_face_edges()  # int32 where the mesh allows
@@ -112,10 +129,28 @@ def laplace_beltrami_plan(topo: Topology):
 
 
 def prepare(verts, topo) -> tuple[torch.Tensor, Topology, FaceGeometry, torch.Tensor]:
+    """Positions (or a geometry standing in for them), topology, face geometry and signs.
+
+    ``verts`` may be a :class:`FaceGeometry` (e.g. :meth:`FaceGeometry.from_edge_lengths`):
+    it is then returned in place of the positions and used as the geometry.
+    """
+    if isinstance(verts, FaceGeometry):
+        topo = intrinsic_topology(verts, topo)
+        signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
+        return verts, topo, verts, signs  # type: ignore[return-value]
     verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo)
     signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
     return verts, topo, geom, signs
+
+
+def intrinsic_topology(geom: FaceGeometry, topo) -> Topology:
+    """The topology of a :class:`FaceGeometry` used in place of positions, checked against it."""
+    if not isinstance(topo, Topology):
+        topo = Topology(topo)
+    if geom.num_faces != topo.num_faces:
+        raise ValueError(f"the geometry has {geom.num_faces} faces but the topology {topo.num_faces}")
+    return topo
 
 
 def mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
@@ -128,7 +163,9 @@ def mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
     return third.new_zeros(topo.num_edges).index_add(0, fe.flatten(), third[:, None].expand(-1, 3).flatten())
 
 
-def connection_laplacian_from(geom: FaceGeometry, signs: torch.Tensor, topo: Topology, n: int) -> torch.Tensor:
+def connection_laplacian_from(
+    geom: FaceGeometry, signs: torch.Tensor, topo: Topology, n: int
+) -> torch.Tensor:
     """Assemble ``L_c^(n)`` from the 3 diagonal and 3 unique off-diagonal terms of each face.
 
     For the pair ``(a, b) = (j, j + 1)`` with third corner ``c = j + 2`` the entry is
@@ -162,7 +199,7 @@ def gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
     """
     lt, dt, st = geom.lengths.t(), geom.dots.t(), signs.t()
     a2 = geom.double_area
-    values = [None] * 9
+    values: list[torch.Tensor] = [a2] * 9  # every slot is set below
     for a in range(3):
         nxt, prv = (a + 1) % 3, (a + 2) % 3
         scale = -st[a] / (6 * lt[a])
@@ -203,7 +240,7 @@ def laplace_beltrami_from(g_values: torch.Tensor, mass: torch.Tensor, topo: Topo
     diag = re.new_zeros(nv).index_add(0, t["cols"], re * re + im * im)
     p, q = t["p"], t["q"]
     prod = re.index_select(0, p) * re.index_select(0, q) + im.index_select(0, p) * im.index_select(0, q)
-    upper = re.new_zeros(t["num_upper"]).index_add(0, t["target"], prod)
+    upper = re.new_zeros(int(t["num_upper"])).index_add(0, t["target"], prod)
     values = torch.cat([diag, upper, upper]).index_select(0, t["gather"])
     return sparse_coo(t["indices"], values, (nv, nv))
 
