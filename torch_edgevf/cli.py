@@ -34,8 +34,10 @@ def _png(path, render, *args, **kwargs):
     try:
         import matplotlib  # noqa: F401
     except ImportError:
-        print("edgevf: matplotlib is not installed, no picture written "
-              "(pip install 'torch_edgevf[plot]')", file=sys.stderr)
+        print(
+            "edgevf: matplotlib is not installed, no picture written (pip install 'torch_edgevf[plot]')",
+            file=sys.stderr,
+        )
         return None
     out = render(*args, path, **kwargs)
     print(f"wrote {out}")
@@ -115,7 +117,10 @@ def cmd_design(args) -> int:
 
     step = _Progress(2 + bool(args.png), args.quiet)
     mesh = _load(args.mesh)
-    step(f"designing the {'curvature-aligned' if args.align == 'curvature' else 'smoothest'} {args.n}-direction field")
+    step(
+        f"designing the {'curvature-aligned' if args.align == 'curvature' else 'smoothest'} "
+        f"{args.n}-direction field"
+    )
     z = _design(mesh, args.n, args.align)
     step(f"writing {args.output}")
     save_field(args.output, mesh.verts, mesh.faces, z.detach(), n=args.n)
@@ -162,8 +167,10 @@ def cmd_param(args) -> int:
     z = _design(mesh, 4, args.align)
     step("solving for the seamless (u, v) parametrization")
     result = parametrize(mesh.verts, mesh.faces, z.detach(), round_integers=not args.no_round)
-    print(f"parametrization: {result.faces.shape[0]} faces, {int(result.singular_vertices.numel())} cones, "
-          f"{result.flipped} flipped faces, energy {result.energy:.4g}, scale {result.scale:.4g}")
+    print(
+        f"parametrization: {result.faces.shape[0]} faces, {int(result.singular_vertices.numel())} cones, "
+        f"{result.flipped} flipped faces, energy {result.energy:.4g}, scale {result.scale:.4g}"
+    )
     if args.png:
         _png(args.png, render_parametrization, result.verts, result.faces, result.uv)
     return 0
@@ -193,7 +200,10 @@ def cmd_bench(args) -> int:
         t0 = time.perf_counter()
         smoothest_field(verts, ops.topology, n=4)
         design = time.perf_counter() - t0
-        print(f"| {name} | {ops.num_faces} | {first:.3f} s | {again:.3f} s | {matvec * 1e3:.1f} ms | {design:.3f} s |")
+        print(
+            f"| {name} | {ops.num_faces} | {first:.3f} s | {again:.3f} s | {matvec * 1e3:.1f} ms "
+            f"| {design:.3f} s |"
+        )
     return 0
 
 
@@ -208,15 +218,20 @@ def cmd_info(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="edgevf", description="Edge-based tangent vector fields on triangle meshes. "
-                                "Without a MESH argument every command runs on the built-in mesh, Spot.")
+    p = argparse.ArgumentParser(
+        prog="edgevf",
+        description="Edge-based tangent vector fields on triangle meshes. "
+        "Without a MESH argument every command runs on the built-in mesh, Spot.",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="log details")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress messages")
     sub = p.add_subparsers(dest="command")
     d = sub.add_parser("demo", help="operators, eigenvalues, the smoothest cross field and a picture")
     d.add_argument("mesh", nargs="?", default=None)
     d.add_argument("-k", type=int, default=6, help="number of eigenvalues")
-    d.add_argument("--png", default="edgevf_demo.png", help="picture of the smoothest cross field ('' for none)")
+    d.add_argument(
+        "--png", default="edgevf_demo.png", help="picture of the smoothest cross field ('' for none)"
+    )
     d.set_defaults(func=cmd_demo)
     g = sub.add_parser("design", help="design an n-direction field and save it")
     g.add_argument("mesh", nargs="?", default=None)

@@ -182,7 +182,9 @@ def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> M
         raise ValueError(f"dtype must be a floating torch dtype, got {dtype}")
     fmt = path.suffix.lower().lstrip(".")
     if fmt not in MESH_FORMATS:
-        raise ValueError(f"cannot read mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}")
+        raise ValueError(
+            f"cannot read mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}"
+        )
     if not path.is_file():
         raise ValueError(f"cannot read mesh {path}: no such file")
     report = MeshReport(path=str(path), format=fmt)
@@ -192,7 +194,9 @@ def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> M
     report.file_vertices, report.file_faces = _stated_counts(path, fmt)
     report.loaded_vertices, report.loaded_faces = len(verts), len(faces)
     if not np.all(np.isfinite(verts)):
-        raise ValueError(f"cannot read mesh {path}: {int((~np.isfinite(verts).all(1)).sum())} vertices are not finite")
+        raise ValueError(
+            f"cannot read mesh {path}: {int((~np.isfinite(verts).all(1)).sum())} vertices are not finite"
+        )
     if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
         raise ValueError(f"cannot read mesh {path}: face indices outside [0, {len(verts)})")
 
@@ -203,7 +207,10 @@ def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> M
         raise ValueError(f"cannot read mesh {path}: no faces left after dropping degenerate faces")
     verts, faces = _drop_unreferenced(verts, faces, report)
     report.num_vertices, report.num_faces = len(verts), len(faces)
-    if report.file_vertices is not None and report.file_vertices > report.num_vertices + report.unreferenced_vertices:
+    if (
+        report.file_vertices is not None
+        and report.file_vertices > report.num_vertices + report.unreferenced_vertices
+    ):
         report.notes.append(
             f"the file has {report.file_vertices - report.num_vertices} vertex records more than the mesh:"
             " unreferenced ones (the reader skips them) or repeated positions (merged)"
@@ -243,7 +250,9 @@ def save_mesh(path, verts, faces) -> None:
     path = Path(path)
     fmt = path.suffix.lower().lstrip(".")
     if fmt not in MESH_FORMATS:
-        raise ValueError(f"cannot save mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}")
+        raise ValueError(
+            f"cannot save mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}"
+        )
     v, f = _check_mesh(verts, faces, f"cannot save mesh {path}")
     if fmt == "obj":
         _write_text(path, "", [("v %.17g %.17g %.17g", v), ("f %d %d %d", f + 1)])
@@ -280,30 +289,48 @@ def _read_trimesh(path: Path, report: MeshReport) -> tuple[np.ndarray, np.ndarra
 
     try:
         loaded = trimesh.load(path, process=False)
-    except (ValueError, IndexError, KeyError, TypeError, NameError, OSError, UnicodeDecodeError, EOFError) as err:
-        raise ValueError(f"cannot read mesh {path}: the {report.format.upper()} parser failed ({type(err).__name__}: {err})") from err
+    except (
+        ValueError,
+        IndexError,
+        KeyError,
+        TypeError,
+        NameError,
+        OSError,
+        UnicodeDecodeError,
+        EOFError,
+    ) as err:
+        raise ValueError(
+            f"cannot read mesh {path}: the {report.format.upper()} parser failed "
+            f"({type(err).__name__}: {err})"
+        ) from err
 
+    parts: list[tuple[trimesh.Trimesh, np.ndarray | None]]
     if isinstance(loaded, trimesh.Trimesh):
         parts = [(loaded, None)]
     elif isinstance(loaded, trimesh.Scene):
         parts, others = [], 0
         for node in loaded.graph.nodes_geometry:
-            transform, name = loaded.graph[node]
+            node_transform, name = loaded.graph[node]
             geom = loaded.geometry[name]
             if isinstance(geom, trimesh.Trimesh):
-                parts.append((geom, transform))
+                parts.append((geom, node_transform))
             else:
                 others += 1
         if others:
             report.notes.append(f"ignored {others} non-mesh geometries (points or lines)")
     elif isinstance(loaded, trimesh.PointCloud):
-        raise ValueError(f"cannot read mesh {path}: it is a point cloud ({len(loaded.vertices)} points, no faces)")
+        raise ValueError(
+            f"cannot read mesh {path}: it is a point cloud ({len(loaded.vertices)} points, no faces)"
+        )
     else:
         raise ValueError(f"cannot read mesh {path}: it holds a {type(loaded).__name__}, not a triangle mesh")
 
     parts = [(g, t) for g, t in parts if len(g.faces)]
     if not parts:
-        raise ValueError(f"cannot read mesh {path}: no triangle faces found (the file is empty or not a valid {report.format.upper()} mesh)")
+        raise ValueError(
+            f"cannot read mesh {path}: no triangle faces found "
+            f"(the file is empty or not a valid {report.format.upper()} mesh)"
+        )
     report.geometries = len(parts)
     verts, faces, offset = [], [], 0
     for geom, transform in parts:
@@ -314,7 +341,9 @@ def _read_trimesh(path: Path, report: MeshReport) -> tuple[np.ndarray, np.ndarra
             report.notes.append("applied a scene transform to a geometry")
             if np.linalg.det(transform[:3, :3]) < 0:
                 f = f[:, ::-1]
-                report.notes.append("a transform was a reflection: reversed that geometry's faces to keep its winding")
+                report.notes.append(
+                    "a transform was a reflection: reversed that geometry's faces to keep its winding"
+                )
         verts.append(v)
         faces.append(f + offset)
         offset += len(v)
@@ -394,9 +423,13 @@ def _check_mesh(verts, faces, where: str) -> tuple[np.ndarray, np.ndarray]:
     v = verts.detach().cpu().numpy() if isinstance(verts, torch.Tensor) else np.asarray(verts)
     f = faces.detach().cpu().numpy() if isinstance(faces, torch.Tensor) else np.asarray(faces)
     if v.ndim != 2 or v.shape[1] != 3 or not np.issubdtype(v.dtype, np.floating):
-        raise ValueError(f"{where}: verts must be a (V, 3) float array, got shape {v.shape} and dtype {v.dtype}")
+        raise ValueError(
+            f"{where}: verts must be a (V, 3) float array, got shape {v.shape} and dtype {v.dtype}"
+        )
     if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
-        raise ValueError(f"{where}: faces must be a (F, 3) integer array, got shape {f.shape} and dtype {f.dtype}")
+        raise ValueError(
+            f"{where}: faces must be a (F, 3) integer array, got shape {f.shape} and dtype {f.dtype}"
+        )
     if len(f) == 0:
         raise ValueError(f"{where}: the mesh has no faces")
     if f.min() < 0 or f.max() >= len(v):
@@ -469,7 +502,10 @@ def save_field(path, verts, faces, z, n: int = 1, **extra) -> None:
         raise ValueError(f"{where}: z must be complex or real, got dtype {zz.dtype}")
     zz = zz.astype(np.complex128)
     if zz.ndim not in (1, 2) or zz.shape[0] != len(edges) or 0 in zz.shape[1:]:
-        raise ValueError(f"{where}: z must have shape (E,) or (E, C) with E = {len(edges)} edges and C >= 1, got {zz.shape}")
+        raise ValueError(
+            f"{where}: z must have shape (E,) or (E, C) with E = {len(edges)} edges and C >= 1, "
+            f"got {zz.shape}"
+        )
     n = _check_n(n, where)
     suffix = path.suffix.lower()
     if suffix == ".npz":
@@ -479,12 +515,21 @@ def save_field(path, verts, faces, z, n: int = 1, **extra) -> None:
                 raise ValueError(f"{where}: extra array name {key!r} is reserved")
             value = value.detach().cpu().numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
             if value.dtype == object:
-                raise ValueError(f"{where}: extra array {key!r} is not numeric (object arrays would need pickle)")
+                raise ValueError(
+                    f"{where}: extra array {key!r} is not numeric (object arrays would need pickle)"
+                )
             arrays[key] = value
         with open(path, "wb") as fh:  # a file object stops np.savez from appending '.npz'
             np.savez(
-                fh, allow_pickle=False, verts=v, faces=f, edges=edges, z=zz,
-                n=np.int64(n), version=np.int64(FIELD_FORMAT_VERSION), **arrays,
+                fh,
+                allow_pickle=False,
+                verts=v,
+                faces=f,
+                edges=edges,
+                z=zz,
+                n=np.int64(n),
+                version=np.int64(FIELD_FORMAT_VERSION),
+                **arrays,
             )
     elif suffix == ".txt":
         if extra:
@@ -492,7 +537,10 @@ def save_field(path, verts, faces, z, n: int = 1, **extra) -> None:
         z2 = zz.reshape(len(edges), -1)
         parts = np.empty((len(edges), 2 * z2.shape[1]))
         parts[:, 0::2], parts[:, 1::2] = z2.real, z2.imag
-        head = f"edgevf_field version={FIELD_FORMAT_VERSION} V={len(v)} F={len(f)} E={len(edges)} C={z2.shape[1]} n={n} dims={zz.ndim}\n"
+        head = (
+            f"edgevf_field version={FIELD_FORMAT_VERSION} V={len(v)} F={len(f)} E={len(edges)} "
+            f"C={z2.shape[1]} n={n} dims={zz.ndim}\n"
+        )
         edge_fmt = "%d %d " + " ".join(["%.17g"] * parts.shape[1])
         with open(path, "w", encoding="ascii") as fh:
             fh.write(head)
@@ -530,7 +578,8 @@ def load_field(path) -> FieldData:
     if edges.shape != expected.shape or not np.array_equal(edges, expected):
         raise ValueError(
             f"{where}: the stored edges ({len(edges)}) do not match the {len(expected)} edges of the faces"
-            " (unique pairs i < j in lexicographic order); the file is corrupted or was written for other faces"
+            " (unique pairs i < j in lexicographic order); the file is corrupted or was written for"
+            " other faces"
         )
     if z.ndim not in (1, 2) or z.shape[0] != len(edges):
         raise ValueError(f"{where}: z must have shape (E,) or (E, C) with E = {len(edges)}, got {z.shape}")
@@ -561,13 +610,17 @@ def _read_npz(path: Path, where: str):
         raise ValueError(f"{where}: missing arrays {missing}; not a field file written by save_field")
     version = int(arrays.pop("version"))
     if version != FIELD_FORMAT_VERSION:
-        raise ValueError(f"{where}: format version {version} is not supported (expected {FIELD_FORMAT_VERSION})")
+        raise ValueError(
+            f"{where}: format version {version} is not supported (expected {FIELD_FORMAT_VERSION})"
+        )
     z = arrays.pop("z")
     edges = arrays.pop("edges")
     if z.dtype != np.complex128:
         raise ValueError(f"{where}: z must be complex128, got {z.dtype}")
     if edges.ndim != 2 or edges.shape[1] != 2 or not np.issubdtype(edges.dtype, np.integer):
-        raise ValueError(f"{where}: edges must be an (E, 2) integer array, got shape {edges.shape}, dtype {edges.dtype}")
+        raise ValueError(
+            f"{where}: edges must be an (E, 2) integer array, got shape {edges.shape}, dtype {edges.dtype}"
+        )
     n = arrays.pop("n")
     if n.shape != () or not np.issubdtype(n.dtype, np.integer):
         raise ValueError(f"{where}: n must be an integer scalar, got shape {n.shape}, dtype {n.dtype}")
@@ -583,18 +636,24 @@ def _read_txt(path: Path, where: str):
         lines = [line for line in fh.read().splitlines() if line.strip()]
     match = _HEADER.match(lines[0]) if lines else None
     if match is None:
-        raise ValueError(f"{where}: the first line must be 'edgevf_field version=1 V=.. F=.. E=.. C=.. n=.. dims=..'")
+        raise ValueError(
+            f"{where}: the first line must be 'edgevf_field version=1 V=.. F=.. E=.. C=.. n=.. dims=..'"
+        )
     head = {k: int(val) for k, val in re.findall(r"(\w+)=(\d+)", match.group(1))}
     missing = [k for k in ("version", "V", "F", "E", "C", "n", "dims") if k not in head]
     if missing:
         raise ValueError(f"{where}: header lacks {missing}")
     if head["version"] != FIELD_FORMAT_VERSION:
-        raise ValueError(f"{where}: format version {head['version']} is not supported (expected {FIELD_FORMAT_VERSION})")
+        raise ValueError(
+            f"{where}: format version {head['version']} is not supported (expected {FIELD_FORMAT_VERSION})"
+        )
     nv, nf, ne, nc = head["V"], head["F"], head["E"], head["C"]
     if head["dims"] not in (1, 2) or nc < 1 or (head["dims"] == 1 and nc != 1):
         raise ValueError(f"{where}: invalid header dims={head['dims']} C={nc}")
     if len(lines) != 1 + nv + nf + ne:
-        raise ValueError(f"{where}: header announces {nv} + {nf} + {ne} data lines, the file has {len(lines) - 1}")
+        raise ValueError(
+            f"{where}: header announces {nv} + {nf} + {ne} data lines, the file has {len(lines) - 1}"
+        )
 
     def block(start, count, cols, dtype, what):
         rows = lines[start : start + count]

@@ -162,7 +162,7 @@ class _Scene:
         self.face_color = base * self.shade[:, None]
         # polygons drawn in order of (face depth, layer): a face, then what lies on it
         self.items: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = []
-        self.markers: list[tuple[np.ndarray, np.ndarray, float, tuple]] = []
+        self.markers: list[tuple[np.ndarray, float, object]] = []
 
     def add_faces(self, face_color=None):
         colors = self.face_color if face_color is None else face_color
@@ -186,14 +186,18 @@ class _Scene:
         det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
         safe = np.where(np.abs(det) > 1e-300, det, 1.0)
         for start in range(0, len(points), 256):
-            q = xy[start:start + 256, None, :]  # (Q, 1, 2)
-            l1 = ((q[..., 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (q[..., 1] - a[:, 1]) * (c[:, 0] - a[:, 0])) / safe
-            l2 = ((b[:, 0] - a[:, 0]) * (q[..., 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[..., 0] - a[:, 0])) / safe
+            q = xy[start : start + 256, None, :]  # (Q, 1, 2)
+            l1 = (
+                (q[..., 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (q[..., 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+            ) / safe
+            l2 = (
+                (b[:, 0] - a[:, 0]) * (q[..., 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (q[..., 0] - a[:, 0])
+            ) / safe
             l0 = 1 - l1 - l2
             inside = (l0 > 1e-9) & (l1 > 1e-9) & (l2 > 1e-9) & (np.abs(det) > 1e-300)
             zq = l0 * fdepth[:, 0] + l1 * fdepth[:, 1] + l2 * fdepth[:, 2]
-            hidden = (inside & (zq > depth[start:start + 256, None] + tol)).any(axis=1)
-            ok[start:start + 256] &= ~hidden
+            hidden = (inside & (zq > depth[start : start + 256, None] + tol)).any(axis=1)
+            ok[start : start + 256] &= ~hidden
         return ok
 
     def add_marker(self, xy: np.ndarray, radius: float, color):
@@ -219,17 +223,31 @@ class _Scene:
         ss = _SUPERSAMPLE
         fig = Figure(figsize=(size / dpi, size / dpi), dpi=dpi * ss, facecolor=background)
         canvas = FigureCanvasAgg(fig)
-        ax = fig.add_axes([0, 0, 1, 1])
+        ax = fig.add_axes((0, 0, 1, 1))
         ax.set_axis_off()
         ax.set_facecolor(background)
         # aliased polygons at ss x the resolution, box-filtered down: smooth silhouettes
         # and no anti-aliasing seams between neighbouring triangles
         edgecolors = np.where(is_face[:, None], 0.35 * colors, colors) if edges else "none"
-        coll = PolyCollection(polys, facecolors=colors, edgecolors=edgecolors,
-                              linewidths=np.where(is_face, 0.4, 0.0) if edges else 0.0, antialiased=False)
+        coll = PolyCollection(
+            polys,
+            facecolors=colors,
+            edgecolors=edgecolors,
+            linewidths=np.where(is_face, 0.4, 0.0) if edges else 0.0,
+            antialiased=False,
+        )
         ax.add_collection(coll)
         for xy, radius, color in self.markers:
-            ax.add_patch(Circle(xy, radius, facecolor=color, edgecolor="black", linewidth=0.6, zorder=3))
+            ax.add_patch(
+                Circle(
+                    (float(xy[0]), float(xy[1])),
+                    radius,
+                    facecolor=color,
+                    edgecolor="black",
+                    linewidth=0.6,
+                    zorder=3,
+                )
+            )
         lo, hi = self.xy.min(axis=0), self.xy.max(axis=0)
         mid, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-12) * 1.06
         ax.set_xlim(mid[0] - half, mid[0] + half)
@@ -246,8 +264,13 @@ class _Scene:
         from matplotlib.image import imsave
 
         imsave(path, np.clip(image[..., :3], 0.0, 1.0), format="png")
-        log.info("wrote %s (%d faces, %d overlay polygons, %d markers)", path, len(self.f),
-                 int((~is_face).sum()), len(self.markers))
+        log.info(
+            "wrote %s (%d faces, %d overlay polygons, %d markers)",
+            path,
+            len(self.f),
+            int((~is_face).sum()),
+            len(self.markers),
+        )
         return path
 
 
@@ -258,9 +281,22 @@ def _check_image(size, dpi):
         raise ValueError(f"dpi must be a positive integer, got {dpi!r}")
 
 
-def render_mesh(verts, faces, path, *, elev: float = 20.0, azim: float = -60.0, up=(0.0, 0.0, 1.0),
-                camera: Camera | None = None, size: int = 800, dpi: int = 100, edges: bool = False,
-                face_colors=None, background="white", title: str | None = None) -> Path:
+def render_mesh(
+    verts,
+    faces,
+    path,
+    *,
+    elev: float = 20.0,
+    azim: float = -60.0,
+    up=(0.0, 0.0, 1.0),
+    camera: Camera | None = None,
+    size: int = 800,
+    dpi: int = 100,
+    edges: bool = False,
+    face_colors=None,
+    background="white",
+    title: str | None = None,
+) -> Path:
     """Render a shaded mesh to a PNG.
 
     Parameters
@@ -323,18 +359,44 @@ def _glyph_polygons(center, normal, dirs, length, n):
     c = center[:, None, :]
     if n == 1:  # an arrow through the barycenter: wide tail, sharp head
         tail, head = c - 0.5 * length * dirs, c + 0.5 * length * dirs
-        quad = [tail - width * side, tail + width * side, head + 0.15 * width * side, head - 0.15 * width * side]
+        quad = [
+            tail - width * side,
+            tail + width * side,
+            head + 0.15 * width * side,
+            head - 0.15 * width * side,
+        ]
     else:  # n spokes from the barycenter
         head = c + 0.5 * length * dirs
-        quad = [c - 0.6 * width * side, c + 0.6 * width * side, head + 0.2 * width * side, head - 0.2 * width * side]
+        quad = [
+            c - 0.6 * width * side,
+            c + 0.6 * width * side,
+            head + 0.2 * width * side,
+            head - 0.2 * width * side,
+        ]
     return np.stack(quad, axis=2).reshape(-1, 4, 3)
 
 
-def render_field(verts, faces, z, path, n: int = 1, *, elev: float = 20.0, azim: float = -60.0,
-                 up=(0.0, 0.0, 1.0), camera: Camera | None = None, size: int = 800, dpi: int = 100,
-                 glyph_scale: float = 1.0, scale_by_magnitude: bool = False, every: int = 1,
-                 glyph_color=_GLYPH_COLOR, edges: bool = False, background="white",
-                 title: str | None = None) -> Path:
+def render_field(
+    verts,
+    faces,
+    z,
+    path,
+    n: int = 1,
+    *,
+    elev: float = 20.0,
+    azim: float = -60.0,
+    up=(0.0, 0.0, 1.0),
+    camera: Camera | None = None,
+    size: int = 800,
+    dpi: int = 100,
+    glyph_scale: float = 1.0,
+    scale_by_magnitude: bool = False,
+    every: int = 1,
+    glyph_color=_GLYPH_COLOR,
+    edges: bool = False,
+    background="white",
+    title: str | None = None,
+) -> Path:
     """Render an ``n``-direction edge field as glyphs at face barycenters.
 
     Each face of the shaded mesh gets ``n`` short segments, the directions of
@@ -381,11 +443,16 @@ def render_field(verts, faces, z, path, n: int = 1, *, elev: float = 20.0, azim:
     idx = np.flatnonzero(keep)
     if idx.size:
         lift = 1e-3 * edge_len * scene.normal[idx]  # keep the glyph on the visible side
-        quads = _glyph_polygons(scene.center[idx] + lift, scene.normal[idx], unit[idx],
-                                (length * rel[idx])[:, None, None], n)
+        quads = _glyph_polygons(
+            scene.center[idx] + lift, scene.normal[idx], unit[idx], (length * rel[idx])[:, None, None], n
+        )
         owners = np.repeat(idx, n)
-        scene.add_polygons(owners, scene.cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
-                           np.asarray(glyph_color, dtype=np.float64), layer=1)
+        scene.add_polygons(
+            owners,
+            scene.cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
+            np.asarray(glyph_color, dtype=np.float64),
+            layer=1,
+        )
     return scene.draw(path, size, dpi, background, title, edges)
 
 
@@ -404,11 +471,26 @@ def _index_vector(x, count: int, name: str) -> np.ndarray | None:
     return a
 
 
-def render_singularities(verts, faces, path, face_index=None, vertex_index=None, *, z=None, n: int = 1,
-                         elev: float = 20.0, azim: float = -60.0, up=(0.0, 0.0, 1.0),
-                         camera: Camera | None = None, size: int = 800, dpi: int = 100,
-                         marker_scale: float = 1.0, edges: bool = False, background="white",
-                         title: str | None = None) -> Path:
+def render_singularities(
+    verts,
+    faces,
+    path,
+    face_index=None,
+    vertex_index=None,
+    *,
+    z=None,
+    n: int = 1,
+    elev: float = 20.0,
+    azim: float = -60.0,
+    up=(0.0, 0.0, 1.0),
+    camera: Camera | None = None,
+    size: int = 800,
+    dpi: int = 100,
+    marker_scale: float = 1.0,
+    edges: bool = False,
+    background="white",
+    title: str | None = None,
+) -> Path:
     """Render singularities: positive indices green, negative red, sized by ``|index|``.
 
     Markers sit at face barycenters (``face_index``) and vertices (``vertex_index``);
@@ -476,10 +558,19 @@ def _field_scene(verts_t, topo, v, f, z, n, cam) -> _Scene:
     edge_len = np.linalg.norm(scene.p - scene.p[:, [1, 2, 0]], axis=-1).mean()
     idx = np.flatnonzero(scene.front & (mag > 0))
     if idx.size:
-        quads = _glyph_polygons(scene.center[idx] + 1e-3 * edge_len * scene.normal[idx], scene.normal[idx],
-                                unit[idx], 0.8 * edge_len, n)
-        scene.add_polygons(np.repeat(idx, n), cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
-                           np.asarray(_GLYPH_COLOR), layer=1)
+        quads = _glyph_polygons(
+            scene.center[idx] + 1e-3 * edge_len * scene.normal[idx],
+            scene.normal[idx],
+            unit[idx],
+            0.8 * edge_len,
+            n,
+        )
+        scene.add_polygons(
+            np.repeat(idx, n),
+            cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
+            np.asarray(_GLYPH_COLOR),
+            layer=1,
+        )
     return scene
 
 
@@ -501,11 +592,25 @@ def _subdivision(k: int):
     return out
 
 
-def render_parametrization(verts, faces, uv, path, *, scale: float = 8.0, subdivide: int = 4,
-                           elev: float = 20.0, azim: float = -60.0, up=(0.0, 0.0, 1.0),
-                           camera: Camera | None = None, size: int = 800, dpi: int = 100,
-                           colors=_CHECKER, edges: bool = False, background="white",
-                           title: str | None = None) -> Path:
+def render_parametrization(
+    verts,
+    faces,
+    uv,
+    path,
+    *,
+    scale: float = 8.0,
+    subdivide: int = 4,
+    elev: float = 20.0,
+    azim: float = -60.0,
+    up=(0.0, 0.0, 1.0),
+    camera: Camera | None = None,
+    size: int = 800,
+    dpi: int = 100,
+    colors=_CHECKER,
+    edges: bool = False,
+    background="white",
+    title: str | None = None,
+) -> Path:
     """Render a parametrization as a checkerboard texture.
 
     Each face is split into ``subdivide**2`` triangles; a triangle with centroid
@@ -541,7 +646,7 @@ def render_parametrization(verts, faces, uv, path, *, scale: float = 8.0, subdiv
     sub = _subdivision(subdivide)  # (T, 3, 3)
     centroid = sub.mean(axis=1)  # (T, 3)
     uvc = np.einsum("tk,fkd->ftd", centroid, uv)  # (F, T, 2)
-    parity = (np.floor(scale * uvc).sum(-1).astype(np.int64) % 2)  # (F, T)
+    parity = np.floor(scale * uvc).sum(-1).astype(np.int64) % 2  # (F, T)
     palette = np.asarray(colors, dtype=np.float64)
     if palette.shape != (2, 3):
         raise ValueError(f"colors must be two RGB triples, got shape {palette.shape}")

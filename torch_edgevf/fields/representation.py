@@ -111,7 +111,7 @@ def nth_power(u, n: int) -> torch.Tensor:
     n = check_n(n)
     u = _as_complex(u, "u")
     r, unit = _unit(u)
-    return r * unit ** n
+    return r * unit**n
 
 
 def nth_root(z, n: int) -> torch.Tensor:
@@ -260,11 +260,11 @@ def _check_points(face_index, bary, topo: Topology, like: torch.Tensor) -> tuple
         raise ValueError(f"bary must have shape ({face_index.shape[0]}, 3), got {tuple(bary.shape)}")
     tol = 1e-6 if like.dtype == torch.float64 else 1e-4
     b = bary.detach()
-    bad = torch.nonzero(((b.sum(1) - 1).abs() > tol) | (b < -tol).any(1) | ~torch.isfinite(b).all(1))
-    if bad.numel():
+    outside = torch.nonzero(((b.sum(1) - 1).abs() > tol) | (b < -tol).any(1) | ~torch.isfinite(b).all(1))
+    if outside.numel():
         raise ValueError(
             "bary must hold barycentric coordinates of points inside their faces "
-            f"(non-negative, summing to 1); violated at points [{list_some(bad.flatten().tolist())}]"
+            f"(non-negative, summing to 1); violated at points [{list_some(outside.flatten().tolist())}]"
         )
     return face_index, bary
 
@@ -363,7 +363,9 @@ def edges_from_vectors(verts, topo, vectors) -> torch.Tensor:
     verts, topo = topology_and_verts(verts, topo)
     vectors = torch.as_tensor(vectors)
     if vectors.shape != (topo.num_edges, 3):
-        raise ValueError(f"vectors must have shape (E, 3) with E = {topo.num_edges}, got {tuple(vectors.shape)}")
+        raise ValueError(
+            f"vectors must have shape (E, 3) with E = {topo.num_edges}, got {tuple(vectors.shape)}"
+        )
     if not vectors.is_floating_point():
         raise ValueError(f"vectors must be a real floating tensor, got {vectors.dtype}")
     vectors = vectors.to(device=verts.device, dtype=verts.dtype)
@@ -491,8 +493,8 @@ def _vertex_fans(topo: Topology):
             current = current[rank[current] < 0]
             step += 1
         if (rank < 0).any():  # cannot happen on a manifold topology
-            raise ValueError("could not order the corners around vertices [%s]"
-                             % list_some(np.unique(corner_vertex[rank < 0])))
+            bad = list_some(np.unique(corner_vertex[rank < 0]))
+            raise ValueError(f"could not order the corners around vertices [{bad}]")
         order = np.lexsort((rank, corner_vertex))
         first_edge = fe[face, (k + 2) % 3]
         last = np.flatnonzero(nxt < 0)

@@ -40,16 +40,16 @@ _T = TypeVar("_T")
 #: The keys of :meth:`Topology.cached`: data derived from the faces alone by the layers
 #: above, built on first use and kept for the life of the topology.
 #:
-#: ========================  ==============================================================
-#: key                       value
-#: ========================  ==============================================================
-#: ``"pattern.EE"``          :class:`~torch_edgevf.operators.patterns.EdgePairPattern` (E, E)
-#: ``"pattern.EV"``          :class:`~torch_edgevf.operators.patterns.EdgeVertexPattern` (E, V)
-#: ``"pattern.VV"``          :class:`~torch_edgevf.operators.patterns.VertexPairPattern` (V, V)
-#: ``"pattern.FE"``          :class:`~torch_edgevf.operators.patterns.Pattern` (F, E)
-#: ``"plan.laplace_beltrami"``  dict of index tensors, :func:`~torch_edgevf.operators.kernels.laplace_beltrami_plan`
-#: ``"fields.vertex_fans"``  tuple of index tensors, the vertex fans of :mod:`torch_edgevf.fields.representation`
-#: ========================  ==============================================================
+#: ===========================  ============================================================
+#: key                          value
+#: ===========================  ============================================================
+#: ``"pattern.EE"``             :class:`~torch_edgevf.operators.patterns.EdgePairPattern`
+#: ``"pattern.EV"``             :class:`~torch_edgevf.operators.patterns.EdgeVertexPattern`
+#: ``"pattern.VV"``             :class:`~torch_edgevf.operators.patterns.VertexPairPattern`
+#: ``"pattern.FE"``             :class:`~torch_edgevf.operators.patterns.Pattern`
+#: ``"plan.laplace_beltrami"``  dict of index tensors (``operators.kernels.laplace_beltrami_plan``)
+#: ``"fields.vertex_fans"``     tuple of index tensors, the vertex fans of ``fields.representation``
+#: ===========================  ============================================================
 #:
 #: Nothing that depends on vertex positions is kept on a topology.
 DerivedKey = Literal[
@@ -104,8 +104,9 @@ class Topology:
 
         src, dst = fi[:, _NEXT], fi[:, _PREV]  # the half-edge opposite each corner
         negative = src > dst  # runs from the higher to the lower index: side 1
-        keys, face_edges = unique_pairs(np.minimum(src, dst).ravel(), np.maximum(src, dst).ravel(), nv,
-                                        index_dtype=it)
+        keys, face_edges = unique_pairs(
+            np.minimum(src, dst).ravel(), np.maximum(src, dst).ravel(), nv, index_dtype=it
+        )
         del src, dst
         ne = keys.shape[0]
 
@@ -284,7 +285,9 @@ class Topology:
         return self._derived[key]  # type: ignore[return-value]
 
 
-def remove_unreferenced_vertices(verts: torch.Tensor, faces) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def remove_unreferenced_vertices(
+    verts: torch.Tensor, faces
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Drop vertices that no face references.
 
     Returns
@@ -453,8 +456,9 @@ def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
         _check_duplicate_faces(f)
 
 
-def unique_pairs(lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None,
-                 index_dtype=np.int64) -> tuple[np.ndarray, np.ndarray]:
+def unique_pairs(
+    lo: np.ndarray, hi: np.ndarray, nv: int, num_lo: int | None = None, index_dtype=np.int64
+) -> tuple[np.ndarray, np.ndarray]:
     """Sorted unique keys ``lo * nv + hi`` of integer pairs and the index of each pair's key.
 
     ``0 <= hi < nv`` and ``0 <= lo < num_lo`` (default ``nv``). The keys are int64; the

@@ -16,7 +16,6 @@ from .patterns import diagonal
 __all__ = ["EdgeOperators"]
 
 
-
 class EdgeOperators(nn.Module):
     """The edge-based operators of one mesh, as torch sparse COO buffers.
 
@@ -54,6 +53,19 @@ class EdgeOperators(nn.Module):
     would drop their imaginary parts).
     """
 
+    faces: torch.Tensor
+    edges: torch.Tensor
+    verts: torch.Tensor
+    mass: torch.Tensor
+    connection_laplacian: torch.Tensor
+    gradient: torch.Tensor
+    curl_div: torch.Tensor
+    laplace_beltrami: torch.Tensor
+    vertex_mass: torch.Tensor
+    lumped_vertex_mass: torch.Tensor
+    face_area: torch.Tensor
+    edge_length: torch.Tensor
+
     def __init__(self, verts, faces, n: int = 1):
         super().__init__()
         verts = as_verts(verts)
@@ -64,12 +76,27 @@ class EdgeOperators(nn.Module):
         self.n = n
         self.register_buffer("faces", topo.faces.to(verts.device))
         self.register_buffer("edges", topo.edges.to(verts.device))
-        for name in ("verts", "mass", "connection_laplacian", "gradient", "curl_div", "laplace_beltrami",
-                     "vertex_mass", "lumped_vertex_mass", "face_area", "edge_length"):
+        for name in (
+            "verts",
+            "mass",
+            "connection_laplacian",
+            "gradient",
+            "curl_div",
+            "laplace_beltrami",
+            "vertex_mass",
+            "lumped_vertex_mass",
+            "face_area",
+            "edge_length",
+        ):
             self.register_buffer(name, None)
         self.update(verts)
 
-    def update(self, verts) -> "EdgeOperators":
+    def _release(self, *names: str) -> None:
+        """Drop buffers before their replacement is built (the old one is then freed)."""
+        for name in names:
+            self._buffers[name] = None
+
+    def update(self, verts) -> EdgeOperators:
         """Re-assemble every operator for new positions of the same mesh."""
         verts = as_verts(verts)
         topo = self.topology
@@ -82,13 +109,13 @@ class EdgeOperators(nn.Module):
         # the new set of operators are never held together (peak memory of large meshes).
         self.verts = verts
         self.mass = diagonal(mass_values)
-        self.connection_laplacian = None
+        self._release("connection_laplacian")
         self.connection_laplacian = kernels.connection_laplacian_from(geom, signs, topo, self.n)
-        self.gradient = self.laplace_beltrami = None
+        self._release("gradient", "laplace_beltrami")
         self.gradient = kernels.cached_pattern(topo, "EV").assemble(kernels.gradient_values(geom, signs))
         self.laplace_beltrami = kernels.laplace_beltrami_from(self.gradient.values(), mass_values, topo)
         self.curl_div = kernels.cached_pattern(topo, "FE").assemble(kernels.curl_values(geom, signs))
-        self.vertex_mass = None
+        self._release("vertex_mass")
         self.vertex_mass = kernels.vertex_mass_from(geom, topo, lumped=False)
         self.lumped_vertex_mass = kernels.vertex_mass_from(geom, topo, lumped=True)
         self.face_area = geom.area
