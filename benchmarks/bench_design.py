@@ -31,10 +31,12 @@ import sys
 import time
 from pathlib import Path
 
+from common import SHARED_MESHES
+
 log = logging.getLogger("bench_design")
 
 REPO = Path(__file__).resolve().parents[1]
-SPOT = Path("/work/shared/meshes/spot.obj")
+SPOT = SHARED_MESHES / "spot.obj"
 
 
 def _emit(**record) -> None:

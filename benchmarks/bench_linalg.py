@@ -5,8 +5,8 @@ Run from the repository root::
     OMP_WAIT_POLICY=PASSIVE OPENBLAS_NUM_THREADS=1 python benchmarks/bench_linalg.py \\
         [--level 6] [--mesh path.obj] [--k 24] [--repeats 2] [--out benchmarks/results/bench_linalg.md]
 
-For icosphere ``--level`` and ``--mesh`` (default: the shared Spot), with the connection
-Laplacian ``L_c`` and mass ``M_z`` of ``EdgeOperators(v, f)``, and for each back-end
+For icosphere ``--level`` and ``--mesh`` (default: ``spot.obj`` of ``common.SHARED_MESHES``), with the
+connection Laplacian ``L_c`` and mass ``M_z`` of ``EdgeOperators(v, f)``, and for each back-end
 (CHOLMOD when scikit-sparse is installed, cvxopt's bundled CHOLMOD when cvxopt is
 installed, and the pip-only SuperLU path) it times
 
@@ -50,9 +50,9 @@ from torch_edgevf.linalg import SparseSolver, eigsh, solve, sparse_matrix, to_sc
 from torch_edgevf.linalg import factor as factor_module
 from torch_edgevf.linalg.eigen import default_shift
 
-from common import machine_info, markdown_table
+from common import SHARED_MESHES, machine_info, markdown_table
 
-SPOT = Path(__file__).resolve().parents[1].parent / "shared" / "meshes" / "spot.obj"
+SPOT = SHARED_MESHES / "spot.obj"
 TOL = 1e-13
 SHORT_EDGES = 50_000  # meshes up to this size get at least 5 interleaved runs of each eigensolve
 TARGETS = {"eig": 0.5, "eig1": 2.0, "sbwd": 1.5, "ebwd": 0.2}

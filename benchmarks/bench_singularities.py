@@ -1,7 +1,7 @@
 """Benchmark: singularity detection and the seamless (u, v) solve.
 
 ``python benchmarks/bench_singularities.py [--large]`` times, on Spot
-(/work/shared/meshes/spot.obj, 23k faces) and with ``--large`` on icosphere(8)
+(``spot.obj`` of ``common.SHARED_MESHES``, 23k faces) and with ``--large`` on icosphere(8)
 (1.31M faces):
 
 * ``singularities`` (region indices, n = 4),
@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import logging
 import time
-from pathlib import Path
 
 import torch
 
@@ -25,8 +24,10 @@ from torch_edgevf.fields.param import parametrize
 from torch_edgevf.fields.singularities import singularities
 from torch_edgevf.mesh.topology import Topology
 
+from common import SHARED_MESHES
+
 log = logging.getLogger("bench_singularities")
-SPOT = Path("/work/shared/meshes/spot.obj")
+SPOT = SHARED_MESHES / "spot.obj"
 
 
 def timed(fn, repeats: int = 3):

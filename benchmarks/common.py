@@ -24,7 +24,9 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_MESHES = Path("/work/shared/meshes")
+# The benchmark meshes (spot.obj, bunny.obj, ...): $TORCH_EDGEVF_MESHES, else the folder
+# shared/meshes next to the repository.
+SHARED_MESHES = Path(os.environ.get("TORCH_EDGEVF_MESHES") or REPO.parent / "shared" / "meshes")
 
 
 # --------------------------------------------------------------------------- timing

@@ -16,7 +16,6 @@ import logging
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from torch_edgevf import fields
 from torch_edgevf.fields.design import FieldDesigner
@@ -25,16 +24,9 @@ log = logging.getLogger(__name__)
 
 
 def load_default_mesh():
-    """Spot from :func:`torch_edgevf.io.default_mesh` (or the shared copy through trimesh)."""
-    try:
-        from torch_edgevf.io import default_mesh
-    except ImportError:
-        import trimesh
+    """Spot, the mesh built into the package (:func:`torch_edgevf.io.default_mesh`)."""
+    from torch_edgevf.io import default_mesh
 
-        mesh = trimesh.load("/work/shared/meshes/spot_low_resolution.obj", process=True, force="mesh")
-        return torch.from_numpy(np.asarray(mesh.vertices, dtype=np.float64)), torch.from_numpy(
-            np.asarray(mesh.faces, dtype=np.int64)
-        )
     mesh = default_mesh()
     return mesh.verts, mesh.faces
 

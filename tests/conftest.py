@@ -54,11 +54,39 @@ def record_instances(monkeypatch, module, name: str) -> list:
     return made
 
 
+def shared_path(*parts: str) -> Path:
+    """``shared/<parts>`` next to the repository's folder, or skip the test saying why.
+
+    The real meshes and the PSB file live outside the repository (``../shared``); the
+    tests that need them are skipped, with the path, where that folder is absent.
+    """
+    path = SHARED.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"{path} is not available (the shared data next to the repository)")
+    return path
+
+
+def psb_file() -> Path:
+    """``psb_watertight_2k.npz``: ``$TORCH_EDGEVF_PSB``, else ``../shared/datasets``; or skip."""
+    env = os.environ.get("TORCH_EDGEVF_PSB")
+    if env:
+        if not Path(env).is_file():
+            pytest.skip(f"TORCH_EDGEVF_PSB={env} is not a file")
+        return Path(env)
+    return shared_path("datasets", "psb_watertight_2k.npz")
+
+
+@pytest.fixture
+def psb(monkeypatch) -> Path:
+    """The PSB file (skip without it), also set as ``$TORCH_EDGEVF_PSB`` for the test."""
+    path = psb_file()
+    monkeypatch.setenv("TORCH_EDGEVF_PSB", str(path))
+    return path
+
+
 def shared_mesh(name: str):
     """Load ``../shared/meshes/<name>`` (merged), or skip when the folder is absent."""
-    path = SHARED / "meshes" / name
-    if not path.exists():
-        pytest.skip(f"{path} is not available")
+    path = shared_path("meshes", name)
     from torch_edgevf.io import load_mesh
 
     return load_mesh(path)

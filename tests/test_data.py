@@ -12,9 +12,7 @@ from torch_edgevf import data
 from torch_edgevf.learning import cache as cache_module
 from torch_edgevf.learning import progress as progress_module
 
-from conftest import perturbed_icosphere
-
-PSB = data.DEFAULT_PSB_PATH
+from conftest import perturbed_icosphere, psb_file
 
 
 @pytest.fixture(scope="module")
@@ -231,9 +229,7 @@ def test_progress_is_quiet_under_pytest(capsys):
 
 
 def _psb_mesh(pid):
-    if not PSB.exists():
-        pytest.skip("PSB file not available")
-    d = np.load(PSB, allow_pickle=False)
+    d = np.load(psb_file(), allow_pickle=False)
     i = int(np.nonzero(d["psb_ids"] == pid)[0][0])
     v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]]
     f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
@@ -256,9 +252,7 @@ def test_repair_degenerate_face_of_psb_351():
     ev.mass_matrix(torch.from_numpy(v2.astype(np.float64)), f2)  # operators accept it
 
 
-def test_psb_dataset_degenerate_policies(caplog):
-    if not PSB.exists():
-        pytest.skip("PSB file not available")
+def test_psb_dataset_degenerate_policies(caplog, psb):
     with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
         ds = data.PSBDataset(split="train", ids=[351], degenerate="skip")
     assert len(ds) == 0 and ds.skipped == [351]
@@ -288,3 +282,19 @@ def test_psb_dataset_errors(tmp_path):
         data.compute_operators(v, f, k_edge=1000)
     with pytest.raises(ValueError, match="vertex_laplacian"):
         data.compute_operators(v, f, vertex_laplacian="fem")
+
+
+def test_psb_path_from_argument_or_environment(tmp_path, monkeypatch):
+    monkeypatch.delenv("TORCH_EDGEVF_PSB", raising=False)
+    with pytest.raises(ValueError, match=r"pass path= or set \$TORCH_EDGEVF_PSB.*edgevf prepare-psb"):
+        data.psb_path()
+    with pytest.raises(ValueError, match="TORCH_EDGEVF_PSB"):
+        data.PSBDataset()
+    missing = tmp_path / "psb.npz"
+    with pytest.raises(ValueError, match="PSB file not found.*psb.npz"):
+        data.psb_path(missing)
+    monkeypatch.setenv("TORCH_EDGEVF_PSB", str(missing))
+    with pytest.raises(ValueError, match="PSB file not found"):
+        data.psb_path()
+    missing.write_bytes(b"")
+    assert data.psb_path() == missing and data.psb_path(str(missing)) == missing

@@ -1,9 +1,6 @@
 """The learning examples run at a small size and give their numbers."""
 
 import numpy as np
-import pytest
-
-from torch_edgevf import data
 
 from conftest import load_example as load
 
@@ -22,10 +19,8 @@ def test_learn_field_denoises_the_guide():
     assert t["smooth_pred"] < t["smooth_noisy"]
 
 
-def _psb_subset(per_class_train=2, per_class_test=1, classes=(0, 1)):
-    if not data.DEFAULT_PSB_PATH.exists():
-        pytest.skip("PSB file not available")
-    d = np.load(data.DEFAULT_PSB_PATH, allow_pickle=False)
+def _psb_subset(path, per_class_train=2, per_class_test=1, classes=(0, 1)):
+    d = np.load(path, allow_pickle=False)
     ids = []
     for c in classes:
         for split, count in ((0, per_class_train), (1, per_class_test)):
@@ -33,8 +28,8 @@ def _psb_subset(per_class_train=2, per_class_test=1, classes=(0, 1)):
     return ids
 
 
-def test_train_psb_small(tmp_path):
-    ids = _psb_subset()
+def test_train_psb_small(tmp_path, psb):
+    ids = _psb_subset(psb)
     out = load("train_psb").main(
         epochs=2,
         width=4,
@@ -53,13 +48,13 @@ def test_train_psb_small(tmp_path):
     assert out["table"].count("\n") == 3 and "| edge |" in out["table"] and "| diffusionnet |" in out["table"]
 
 
-def test_train_psb_ddp_two_processes(tmp_path):
+def test_train_psb_ddp_two_processes(tmp_path, psb):
     """Two gloo processes on 127.0.0.1, two steps (about 5 s).
 
     The example starts its workers with ``spawn``: with ``fork`` (after the parent had
     started OpenMP threads) this test hung twice on 2026-11-23 and was marked slow.
     """
-    ids = _psb_subset()
+    ids = _psb_subset(psb)
     out = load("train_psb_ddp").main(
         world_size=2,
         max_steps=2,

@@ -15,7 +15,9 @@ from .learning.cache import (
 )
 from .learning.datasets import (
     DEFAULT_PSB_PATH,
+    PSB_ENV,
     PSBDataset,
+    psb_path,
 )
 from .learning.precompute import (
     MeshFields,
@@ -38,7 +40,9 @@ __all__ = [
     "collate_meshes",
     "OperatorCache",
     "DEFAULT_PSB_PATH",
+    "PSB_ENV",
     "PSBDataset",
+    "psb_path",
     "MeshFields",
     "MeshOperators",
     "compute_operators",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
@@ -17,9 +18,37 @@ from .progress import progress
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PSBDataset", "DEFAULT_PSB_PATH"]
+__all__ = ["PSBDataset", "PSB_ENV", "psb_path"]
 
-DEFAULT_PSB_PATH = Path("/work/shared/datasets/psb_watertight_2k.npz")
+PSB_ENV = "TORCH_EDGEVF_PSB"
+"""Environment variable naming ``psb_watertight_2k.npz`` when no path is given."""
+
+# Kept for code written against earlier versions: there is no default location; the path
+# comes from the argument or from ``$TORCH_EDGEVF_PSB`` (see :func:`psb_path`).
+DEFAULT_PSB_PATH = None
+
+
+def psb_path(path=None) -> Path:
+    """The path of ``psb_watertight_2k.npz``: ``path``, else ``$TORCH_EDGEVF_PSB``.
+
+    Raises
+    ------
+    ValueError
+        Neither is given, or the file does not exist. The message says how to build the
+        file (``edgevf prepare-psb``).
+    """
+    how = (
+        "build it from the Princeton Segmentation Benchmark with "
+        "'edgevf prepare-psb SRC_DIR psb_watertight_2k.npz' (see docs/learning.md)"
+    )
+    if path is None:
+        path = os.environ.get(PSB_ENV) or None
+        if path is None:
+            raise ValueError(f"no PSB file given: pass path= or set ${PSB_ENV}; {how}")
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise ValueError(f"PSB file not found: {path}; {how}")
+    return path
 
 
 class PSBDataset(torch.utils.data.Dataset):
@@ -39,7 +68,7 @@ class PSBDataset(torch.utils.data.Dataset):
 
     Parameters
     ----------
-    path : path of ``psb_watertight_2k.npz``
+    path : path of ``psb_watertight_2k.npz``; None: ``$TORCH_EDGEVF_PSB`` (:func:`psb_path`)
     split : {"train", "test", "all"} (the file's fixed split: 16 / 4 meshes per class)
     cache_dir : path of the operator cache; None computes without caching
     n, k_edge, k_vertex, vertex_gradient : options of :func:`compute_operators`
@@ -52,7 +81,7 @@ class PSBDataset(torch.utils.data.Dataset):
 
     def __init__(
         self,
-        path=DEFAULT_PSB_PATH,
+        path=None,
         split: str = "train",
         cache_dir=None,
         n: int = 1,
@@ -71,9 +100,7 @@ class PSBDataset(torch.utils.data.Dataset):
             raise ValueError(f"degenerate must be 'repair', 'skip' or 'error', got {degenerate!r}")
         if dtype not in (torch.float32, torch.float64):
             raise ValueError(f"dtype must be torch.float32 or torch.float64, got {dtype}")
-        path = Path(path)
-        if not path.exists():
-            raise ValueError(f"PSB file not found: {path}")
+        path = psb_path(path)
         with np.load(path, allow_pickle=False) as data:
             d = {name: data[name] for name in data.files}
         self.classes = [str(c) for c in d["classes"]]
