@@ -65,7 +65,7 @@ import torch
 from .._dtypes import complex_dtype
 from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, list_some
 from ..linalg import SparseSolver, eigsh, expm_multiply, solve
-from ..mesh.geometry import dihedral_angles, edge_lengths, face_geometry
+from ..mesh.geometry import FaceGeometry, dihedral_angles, edge_lengths, face_geometry
 from ..mesh.topology import Topology
 from ..operators import functional as ops
 from ..operators import kernels
@@ -110,7 +110,9 @@ class FieldDesigner:
 
     Parameters
     ----------
-    verts : (V, 3) float tensor
+    verts : (V, 3) float tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry`
+        (intrinsic: from edge lengths, e.g. of a repaired mesh; the curvature methods then
+        need positions and are not available)
     faces : (F, 3) integer tensor, or a :class:`~torch_edgevf.mesh.topology.Topology`
     n : int >= 1
         Symmetry order: the designed ``z`` are representation vectors of ``n``-direction
@@ -134,17 +136,25 @@ class FieldDesigner:
 
     def __init__(self, verts, faces, n: int = 1):
         self.n = check_n(n)
-        verts = as_verts(verts)
-        topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
-        check_vertex_count(verts, topo.num_vertices)
+        if isinstance(verts, FaceGeometry):  # intrinsic: lengths only (no curvature alignment)
+            topo = kernels.intrinsic_topology(verts, faces)
+            geom = verts
+            per_edge = geom.lengths.new_zeros(topo.num_edges).index_put(
+                (topo.face_edges.to(geom.device).flatten(),), geom.lengths.flatten()
+            )
+            self.mean_edge_length = per_edge.mean()
+        else:
+            verts = as_verts(verts)
+            topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
+            check_vertex_count(verts, topo.num_vertices)
+            geom = face_geometry(verts, topo)
+            self.mean_edge_length = edge_lengths(verts, topo).mean()
         self.topology = topo
         self.verts = verts
-        geom = face_geometry(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
         self._geom, self._signs = geom, signs
         self.mass = kernels.mass_values(geom, topo)
         self.laplacian = self._laplacian(self.n)
-        self.mean_edge_length = edge_lengths(verts, topo).mean()
         self._solvers: dict = {}
         self._real_laplacian = None
 
@@ -653,7 +663,7 @@ def smoothest_field(verts, faces, n: int = 1) -> torch.Tensor:
 
     Parameters
     ----------
-    verts : (V, 3) float tensor
+    verts : (V, 3) float tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry`
     faces : (F, 3) integer tensor or Topology
     n : int >= 1
 

@@ -73,8 +73,16 @@ from dataclasses import dataclass, field
 import torch
 
 from .._validation import as_edge_field, check_n
-from ..mesh.geometry import angle_defects, face_geometry, face_normals, pair_transport, topology_and_verts
+from ..mesh.geometry import (
+    FaceGeometry,
+    angle_defects,
+    face_geometry,
+    face_normals,
+    pair_transport,
+    topology_and_verts,
+)
 from ..mesh.topology import Topology
+from ..operators.kernels import intrinsic_topology
 
 __all__ = [
     "Singularities",
@@ -180,6 +188,30 @@ def _unit(z: torch.Tensor) -> torch.Tensor:
     return torch.where(a > 0, z / torch.where(a > 0, a, torch.ones_like(a)), torch.ones_like(z))
 
 
+def _geometry(verts, topo):
+    """Detached positions (or a :class:`FaceGeometry` in their place), topology and face geometry."""
+    if isinstance(verts, FaceGeometry):
+        topo = intrinsic_topology(verts, topo)
+        geom = FaceGeometry(verts.lengths.detach(), verts.double_area.detach(), verts.dots.detach())
+        return geom, topo, geom
+    verts, topo = topology_and_verts(verts, topo)
+    verts = verts.detach()
+    return verts, topo, face_geometry(verts, topo)
+
+
+def _angle_defects(verts, topo, geom: FaceGeometry) -> torch.Tensor:
+    """:func:`angle_defects`, also for a geometry standing in for the positions."""
+    if not isinstance(verts, FaceGeometry):
+        return angle_defects(verts, topo)
+    faces = topo.faces.to(geom.device)
+    total = geom.lengths.new_zeros(topo.num_vertices).index_add(0, faces.flatten(), geom.angles.flatten())
+    full = torch.where(topo.boundary_vertices.to(geom.device), math.pi, 2 * math.pi).to(total.dtype)
+    defect = full - total
+    if topo.unreferenced_vertices.numel():
+        defect = defect.index_fill(0, topo.unreferenced_vertices.to(geom.device), 0.0)
+    return defect
+
+
 def face_rotations(verts, topo, z, n: int = 1) -> torch.Tensor:
     """Rotation of the field along the three mid-segments of every face (thesis 4.1).
 
@@ -194,13 +226,11 @@ def face_rotations(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (F, 3) real tensor in ``[-pi, pi]``.
     """
-    verts, topo = topology_and_verts(verts, topo)
+    verts, topo, geom = _geometry(verts, topo)
     n = check_n(n)
-    verts = verts.detach()
     z = as_edge_field(z, topo, verts).detach()
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
-    geom = face_geometry(verts, topo)
     signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
     r = pair_transport(geom, signs, n).reshape(-1, 3, 3)
     u = _unit(z)[topo.face_edges.to(verts.device)]  # (F, 3)
@@ -215,7 +245,8 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
 
     Parameters
     ----------
-    verts : (V, 3) tensor
+    verts : (V, 3) tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry` in
+        their place (intrinsic, e.g. a repaired mesh's mollified lengths)
     faces : (F, 3) int tensor or :class:`Topology`
     z : (E,) complex tensor, the representation vector (``n``-th angle power) per edge
     n : int, the symmetry (1 vector field, 2 line field, 4 cross field)
@@ -238,7 +269,7 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
     """
     if boundary not in _BOUNDARY:
         raise ValueError(f"boundary must be one of {_BOUNDARY}, got {boundary!r}")
-    verts, topo = topology_and_verts(verts, faces)
+    verts, topo, geom = _geometry(verts, faces)
     n = check_n(n)
     with torch.no_grad():
         omega = face_rotations(verts, topo, z, n).to(torch.float64)
@@ -246,7 +277,7 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
         fl = topo.faces.to(dev)
         two_pi = 2 * math.pi
         face_turn = omega.sum(1) / two_pi
-        defect = angle_defects(verts.detach(), topo).to(torch.float64)
+        defect = _angle_defects(verts, topo, geom).to(torch.float64)
         vsum = torch.zeros(topo.num_vertices, dtype=torch.float64, device=dev).index_add(
             0, fl.flatten(), omega.flatten()
         )

@@ -7,7 +7,8 @@ imports the layers above (operators, fields, learning).
 * :mod:`.geometry`: lengths, areas, angles and transport from positions;
 * :mod:`.meshes`: procedural test shapes (icosphere, grid, ellipsoid, ...);
 * :mod:`.diagnose`: a report on a mesh's suitability;
-* :mod:`.repair`: collapse of zero-area faces.
+* :mod:`.repair`: :func:`~.repair.repair` of triangle soups (orientation, non-manifold
+  cuts, duplicates, intrinsic mollification), and collapse of zero-area faces.
 """
 
 from . import diagnose, geometry, meshes, repair, topology

@@ -76,6 +76,46 @@ class FaceGeometry:
         """(F, 3) ``cot(alpha_k) = d_k / (2A)``."""
         return self.dots / self.double_area[:, None]
 
+    @property
+    def dtype(self) -> torch.dtype:
+        """The real dtype of the quantities (so a geometry can stand in for positions)."""
+        return self.lengths.dtype
+
+    @property
+    def device(self) -> torch.device:
+        return self.lengths.device
+
+    @property
+    def num_faces(self) -> int:
+        return self.lengths.shape[0]
+
+    @classmethod
+    def from_edge_lengths(cls, lengths: torch.Tensor, topo: Topology) -> FaceGeometry:
+        """Build from one length per edge of ``topo`` (in the order of ``topo.edges``).
+
+        The intrinsic path for meshes whose positions cannot be trusted, e.g. the mollified
+        lengths of :func:`torch_edgevf.mesh.repair.repair`; differentiable in ``lengths``.
+        The operators, :class:`~torch_edgevf.fields.design.FieldDesigner` and
+        :func:`~torch_edgevf.fields.singularities.singularities` accept the result in place
+        of vertex positions.
+
+        Parameters
+        ----------
+        lengths : (E,) floating tensor
+        topo : :class:`Topology`
+        """
+        if not isinstance(topo, Topology):
+            raise ValueError(f"topo must be a Topology, got {type(topo).__name__}")
+        if not isinstance(lengths, torch.Tensor) or lengths.dim() != 1 or lengths.shape[0] != topo.num_edges:
+            shape = tuple(lengths.shape) if isinstance(lengths, torch.Tensor) else type(lengths).__name__
+            raise ValueError(f"lengths must be an (E,) tensor with E = {topo.num_edges}, got {shape}")
+        if not lengths.is_floating_point():
+            raise ValueError(f"lengths must have a floating dtype, got {lengths.dtype}")
+        if not bool(torch.isfinite(lengths.detach()).all()):
+            bad = torch.nonzero(~torch.isfinite(lengths.detach())).flatten().tolist()
+            raise ValueError(f"lengths has NaN or Inf values at edges [{list_some(bad)}]")
+        return cls.from_lengths(lengths[topo.face_edges.to(lengths.device)])
+
     @classmethod
     def from_lengths(cls, lengths: torch.Tensor) -> FaceGeometry:
         """Build from edge lengths alone (intrinsic meshes).

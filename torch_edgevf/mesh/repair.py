@@ -1,13 +1,41 @@
-"""Repair of zero-area faces by edge collapse."""
+"""Mesh repair: triangle soups made into meshes the operators accept, every change reported.
+
+:func:`repair` takes vertex positions and polygons as they come from a file and returns a
+:class:`RepairResult`: a manifold, consistently oriented triangle mesh, maps from its
+vertices and faces to the input ones, edge lengths that are valid even where faces have
+zero area (intrinsic mollification), and a :class:`RepairReport` that names every
+element that was changed. No vertex is ever moved; the input is never modified.
+
+:func:`repair_degenerate_faces` is the older, extrinsic alternative for closed manifold
+meshes: it removes zero-area faces by edge collapse.
+"""
 
 from __future__ import annotations
 
-import numpy as np
-import torch
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
+import numpy as np
+import scipy.sparse as sp
+import torch
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+from .._validation import list_some
+from .geometry import FaceGeometry
 from .topology import Topology
 
-__all__ = ["find_degenerate_faces", "repair_degenerate_faces"]
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "RepairReport",
+    "RepairResult",
+    "MappedEdgeField",
+    "repair",
+    "mollify_lengths",
+    "find_degenerate_faces",
+    "repair_degenerate_faces",
+]
 
 
 def find_degenerate_faces(verts, faces) -> np.ndarray:
@@ -93,3 +121,704 @@ def _collapse(v: np.ndarray, f: np.ndarray, u: int, w: int):
     except ValueError:
         return None
     return g, np.nonzero(keep)[0]
+
+
+# --------------------------------------------------------------------------- soups
+
+#: Margin of :func:`mollify_lengths` relative to the mean edge length (robust_laplacian's
+#: default ``mollify_factor``).
+MOLLIFY_FACTOR = 1e-5
+
+
+def mollify_lengths(lengths: torch.Tensor, face_edges, factor: float = MOLLIFY_FACTOR):
+    """Intrinsic mollification of edge lengths (Sharp and Crane 2020, section 4.5).
+
+    Every length is increased by the same smallest ``epsilon >= 0`` that makes each
+    triangle satisfy the triangle inequality strictly, with the margin ``delta``:
+
+    .. math::  \\delta = \\text{factor}\\,\\bar l, \\qquad
+               \\epsilon = \\max\\Big(0, \\max_{f, k}\\, \\delta - (l_{k+1} + l_{k+2} - l_k)\\Big),
+               \\qquad \\tilde l = l + \\epsilon,
+
+    so that ``l~_{k+1} + l~_{k+2} - l~_k >= delta`` in every face. Faces that already have
+    the margin keep their shape up to the common shift, and ``epsilon = 0`` when no face
+    is degenerate. Differentiable in ``lengths``.
+
+    Parameters
+    ----------
+    lengths : (E,) floating tensor, one per edge
+    face_edges : (F, 3) integer tensor or array, the edge opposite each corner
+    factor : float >= 0, ``delta`` relative to the mean edge length
+
+    Returns
+    -------
+    lengths : (E,) tensor ``l + epsilon``
+    epsilon : scalar tensor
+    faces : (K,) int64 tensor, the faces that lacked the margin
+    """
+    if not (isinstance(factor, (int, float)) and factor >= 0):
+        raise ValueError(f"factor must be a number >= 0, got {factor!r}")
+    fe = torch.as_tensor(face_edges, dtype=torch.int64, device=lengths.device)
+    fl = lengths[fe]  # (F, 3)
+    slack = fl.sum(1, keepdim=True) - 2 * fl  # l_{k+1} + l_{k+2} - l_k
+    delta = factor * lengths.mean()
+    short = (delta - slack).amax(1)
+    eps = torch.clamp(short.max(), min=0.0)
+    faces = torch.nonzero(short.detach() > 0).flatten()
+    return lengths + eps, eps, faces
+
+
+@dataclass
+class RepairReport:
+    """Every change :func:`repair` made, with the indices of the elements (input indices).
+
+    Attributes
+    ----------
+    input_vertices, input_faces : counts of the input (faces are polygons)
+    num_vertices, num_faces, num_edges : counts of the repaired mesh
+    triangulated_faces : input polygons with more than three corners, split into triangles
+    added_triangles : how many triangles more than polygons that made
+    repeated_index_faces : input faces with a repeated vertex index (the repeats removed;
+        what is left of fewer than three vertices is dropped)
+    nonfinite_vertices : vertices with NaN or Inf coordinates (their faces are dropped)
+    duplicate_faces : ``(face, first)`` pairs, ``face`` has the vertices of ``first``
+        (any order or winding) and is dropped
+    dropped_faces : ``{input face: reason}`` for every input face of which no triangle is
+        left (each is also in one of the lists above)
+    flipped_faces : input faces whose winding was reversed (the minority of their sheet)
+    non_manifold_edges : input vertex pairs shared by more than two faces; cut, each face
+        then has its own copy of the edge (a boundary edge)
+    non_manifold_vertices : input vertices whose faces form several fans (bowties), split
+    split_vertices : ``{input vertex: copies}`` for every vertex that was split (bowties
+        and the ends of cut edges)
+    unreferenced_vertices : input vertices that no kept face uses (dropped)
+    mollified_faces : faces of the repaired mesh without the triangle-inequality margin
+        (zero-area faces, needles); their input faces are ``face_origin[mollified_faces]``
+    epsilon, delta : the length added to every edge and the margin (see :func:`mollify_lengths`)
+    components : per component of the repaired mesh, a dict of its counts
+    """
+
+    input_vertices: int = 0
+    input_faces: int = 0
+    num_vertices: int = 0
+    num_faces: int = 0
+    num_edges: int = 0
+    triangulated_faces: list[int] = field(default_factory=list)
+    added_triangles: int = 0
+    repeated_index_faces: list[int] = field(default_factory=list)
+    nonfinite_vertices: list[int] = field(default_factory=list)
+    duplicate_faces: list[tuple[int, int]] = field(default_factory=list)
+    dropped_faces: dict[int, str] = field(default_factory=dict)
+    flipped_faces: list[int] = field(default_factory=list)
+    non_manifold_edges: list[tuple[int, int]] = field(default_factory=list)
+    non_manifold_vertices: list[int] = field(default_factory=list)
+    split_vertices: dict[int, int] = field(default_factory=dict)
+    unreferenced_vertices: list[int] = field(default_factory=list)
+    mollified_faces: list[int] = field(default_factory=list)
+    epsilon: float = 0.0
+    delta: float = 0.0
+    components: list[dict] = field(default_factory=list)
+
+    @property
+    def changed(self) -> bool:
+        """Whether anything was changed (other than nothing)."""
+        return bool(self.changes())
+
+    def changes(self) -> dict[str, int]:
+        """``{kind of change: count}`` for every kind that occurred."""
+        counts = {
+            "triangulated polygons": len(self.triangulated_faces),
+            "faces with repeated indices": len(self.repeated_index_faces),
+            "non-finite vertices": len(self.nonfinite_vertices),
+            "duplicate faces": len(self.duplicate_faces),
+            "dropped faces": len(self.dropped_faces),
+            "flipped faces": len(self.flipped_faces),
+            "non-manifold edges cut": len(self.non_manifold_edges),
+            "non-manifold vertices split": len(self.non_manifold_vertices),
+            "vertices split": len(self.split_vertices),
+            "unreferenced vertices": len(self.unreferenced_vertices),
+            "mollified faces": len(self.mollified_faces),
+        }
+        return {k: v for k, v in counts.items() if v}
+
+    def summary(self) -> str:
+        """A readable account of the changes, with (some of) the element indices."""
+        lines = [
+            f"repair: {self.input_vertices} vertices, {self.input_faces} faces in; "
+            f"{self.num_vertices} vertices, {self.num_faces} triangles, {self.num_edges} edges out"
+        ]
+
+        def add(items, what):
+            if items:
+                lines.append(f"  {what}: {len(items)} [{list_some(list(items))}]")
+
+        add(self.triangulated_faces, f"polygons triangulated (+{self.added_triangles} triangles), faces")
+        add(self.repeated_index_faces, "faces with a repeated vertex index (repeats removed), faces")
+        add(self.nonfinite_vertices, "vertices with NaN or Inf coordinates (their faces dropped)")
+        add([f"{a} (= {b})" for a, b in self.duplicate_faces], "duplicate faces dropped")
+        if self.dropped_faces:
+            reasons: dict[str, list[int]] = {}
+            for f, why in self.dropped_faces.items():
+                reasons.setdefault(why, []).append(f)
+            for why, fs in reasons.items():
+                add(fs, f"faces dropped ({why})")
+        add(self.flipped_faces, "faces flipped to the orientation of their sheet")
+        add(self.non_manifold_edges, "non-manifold edges cut into manifold sheets, vertex pairs")
+        add(self.non_manifold_vertices, "non-manifold vertices split into one vertex per fan")
+        if self.split_vertices:
+            extra = sum(self.split_vertices.values()) - len(self.split_vertices)
+            add(list(self.split_vertices), f"vertices split (+{extra} copies)")
+        add(self.unreferenced_vertices, "unreferenced vertices dropped")
+        if self.mollified_faces:
+            add(
+                self.mollified_faces,
+                f"faces without the triangle-inequality margin {self.delta:.3g}: every edge length "
+                f"+{self.epsilon:.3g} (intrinsic mollification, no vertex moved), repaired faces",
+            )
+        if len(lines) == 1:
+            lines.append("  nothing to repair")
+        if self.components:
+            chis: dict[int, int] = {}
+            for c in self.components:
+                chis[c["euler"]] = chis.get(c["euler"], 0) + 1
+            boundary = sum(c["boundary_edges"] for c in self.components)
+            lines.append(
+                f"  {len(self.components)} components, Euler characteristics "
+                + ", ".join(f"{chi} (x{m})" for chi, m in sorted(chis.items(), reverse=True))
+                + f"; {boundary} boundary edges"
+            )
+            for k, c in enumerate(self.components):
+                if c["flipped"] or c["mollified"]:
+                    lines.append(
+                        f"  component {k}: {c['faces']} faces, Euler characteristic {c['euler']}, "
+                        f"{c['boundary_edges']} boundary edges, {c['flipped']} flipped, "
+                        f"{c['mollified']} mollified"
+                    )
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+@dataclass
+class MappedEdgeField:
+    """An edge field of a repaired mesh, expressed on the input mesh (:meth:`RepairResult.map_edge_field`).
+
+    Attributes
+    ----------
+    edges : (E_in, 2) int64 tensor, the input edges (sides of the input polygons) ``i < j``
+    values : (E_in,) or (E_in, C) complex tensor, in the frame of the input edge (from ``i``
+        to ``j``); NaN where the edge was cut (several images) or has none (dropped faces)
+    cut : (E_in,) bool tensor, edges with several images: read ``face_values`` there
+    face_values : (F', 3) or (F', 3, C) complex tensor, the value of the edge opposite each
+        corner of each repaired face, in the frame of the input edge between the input
+        vertices of its ends (``vertex_origin``); the face comes from input face
+        ``face_origin``
+    """
+
+    edges: torch.Tensor
+    values: torch.Tensor
+    cut: torch.Tensor
+    face_values: torch.Tensor
+
+
+@dataclass
+class RepairResult:
+    """A repaired mesh, how it relates to the input, and the report (:func:`repair`).
+
+    Attributes
+    ----------
+    verts : (V', 3) tensor, positions of the repaired vertices (copies of input positions)
+    faces : (F', 3) int64 tensor, counter-clockwise triangles, manifold and consistently
+        oriented per component
+    vertex_origin : (V',) int64 tensor, the input vertex of each vertex (several for a split one)
+    face_origin : (F',) int64 tensor, the input face of each triangle
+    flipped : (F',) bool tensor, triangles whose winding is reversed from the input's
+    topology : :class:`Topology` of ``faces``
+    edge_lengths : (E',) tensor in the order of ``topology.edges``: the lengths of the
+        positions, mollified where faces lacked the margin (then ``epsilon > 0``)
+    epsilon : float, the length added to every edge (0 when no face needed it)
+    report : :class:`RepairReport`
+
+    Use ``(result.verts, result.topology)`` for the operators when ``epsilon == 0``, and
+    ``(result.geometry, result.topology)`` otherwise (always valid): the operators, field
+    design and singularities accept a :class:`FaceGeometry` in place of positions.
+    """
+
+    verts: torch.Tensor
+    faces: torch.Tensor
+    vertex_origin: torch.Tensor
+    face_origin: torch.Tensor
+    flipped: torch.Tensor
+    topology: Topology
+    edge_lengths: torch.Tensor
+    epsilon: float
+    report: RepairReport
+    input_edges: torch.Tensor
+    num_input_faces: int
+    num_input_vertices: int
+
+    @property
+    def mollified(self) -> bool:
+        """Whether the lengths differ from those of the positions (use :attr:`geometry`)."""
+        return self.epsilon > 0
+
+    @property
+    def geometry(self) -> FaceGeometry:
+        """The intrinsic :class:`FaceGeometry` of :attr:`edge_lengths` (finite, valid faces)."""
+        return FaceGeometry.from_lengths(
+            self.edge_lengths[self.topology.face_edges.to(self.edge_lengths.device)]
+        )
+
+    def geometry_from_lengths(self, lengths: torch.Tensor) -> FaceGeometry:
+        """:class:`FaceGeometry` of other (E',) edge lengths, e.g. ones that require grad."""
+        return FaceGeometry.from_lengths(lengths[self.topology.face_edges.to(lengths.device)])
+
+    def map_edge_field(self, z, n: int = 1) -> MappedEdgeField:
+        """Express an edge field of the repaired mesh on the input mesh.
+
+        The repaired edge ``(a, b)``, ``a < b``, is the input edge between
+        ``vertex_origin[a]`` and ``vertex_origin[b]``; its frame runs from ``a`` to ``b``,
+        that of the input edge from the lower to the higher input index. Where the two
+        disagree the direction reverses, which multiplies the representation vector of an
+        ``n``-direction field by ``(-1)^n``. Angles stay measured about the normal of the
+        repaired (consistently oriented) surface; on a face of :attr:`flipped`, the input
+        winding measures them the other way (take the conjugate).
+
+        An input edge with exactly one image gets its value in ``values``; an edge cut into
+        several (non-manifold edges, edges at split vertices) gets NaN there and has one
+        value per face in ``face_values``. Diagonals added by triangulating polygons are
+        not input edges and appear only in ``face_values``.
+
+        Parameters
+        ----------
+        z : (E',) or (E', C) complex tensor on the repaired mesh
+        n : int >= 1, the symmetry order of the field
+
+        Returns
+        -------
+        :class:`MappedEdgeField`
+        """
+        topo = self.topology
+        z = torch.as_tensor(z)
+        if z.dim() not in (1, 2) or z.shape[0] != topo.num_edges:
+            raise ValueError(
+                f"z must have shape (E,) or (E, C) with E = {topo.num_edges}, got {tuple(z.shape)}"
+            )
+        if not isinstance(n, (int, np.integer)) or isinstance(n, bool) or n < 1:
+            raise ValueError(f"n must be an integer >= 1, got {n!r}")
+        if not z.is_complex():
+            z = z.to(torch.complex128 if z.dtype == torch.float64 else torch.complex64)
+        vo = self.vertex_origin.numpy()
+        e = topo.edges.numpy()
+        oa, ob = vo[e[:, 0]], vo[e[:, 1]]
+        reverse = torch.from_numpy(oa > ob).to(z.device)
+        sign = torch.where(reverse, -1.0 if n % 2 else 1.0, 1.0).to(z.real.dtype)
+        zin = z * (sign if z.dim() == 1 else sign[:, None])
+        lo, hi = np.minimum(oa, ob), np.maximum(oa, ob)
+        nv = max(self.num_input_vertices, 1)
+        inp = self.input_edges.numpy()
+        in_keys = inp[:, 0] * nv + inp[:, 1]
+        keys = lo * nv + hi
+        pos = np.searchsorted(in_keys, keys)
+        pos = np.minimum(pos, max(len(in_keys) - 1, 0))
+        is_input = in_keys[pos] == keys if len(in_keys) else np.zeros(len(keys), dtype=bool)
+        images = np.bincount(pos[is_input], minlength=len(in_keys))
+        shape = (len(in_keys),) + tuple(z.shape[1:])
+        values = torch.full(shape, complex("nan"), dtype=z.dtype, device=z.device)
+        single = is_input & (images[pos] == 1)
+        idx = torch.from_numpy(pos[single]).to(z.device)
+        values[idx] = zin[torch.from_numpy(np.flatnonzero(single)).to(z.device)]
+        fe = topo.face_edges.to(z.device)
+        return MappedEdgeField(
+            edges=self.input_edges.clone(),
+            values=values,
+            cut=torch.from_numpy(images > 1),
+            face_values=zin[fe],
+        )
+
+    def map_face_values(self, x) -> torch.Tensor:
+        """Per-face values of the repaired mesh on the input faces: (F_in,) or (F_in, C).
+
+        The mean over the triangles of each input face (one triangle unless a polygon was
+        triangulated); NaN for the dropped faces of ``report.dropped_faces``.
+        """
+        x = torch.as_tensor(x)
+        if x.shape[0] != self.topology.num_faces:
+            raise ValueError(f"x must have {self.topology.num_faces} rows (faces), got {tuple(x.shape)}")
+        dtype = x.dtype if (x.is_floating_point() or x.is_complex()) else torch.float64
+        x = x.to(dtype)
+        shape = (self.num_input_faces,) + tuple(x.shape[1:])
+        origin = self.face_origin.to(x.device)
+        total = torch.zeros(shape, dtype=dtype, device=x.device).index_add(0, origin, x)
+        count = torch.zeros(self.num_input_faces, dtype=x.real.dtype, device=x.device).index_add(
+            0, origin, torch.ones(origin.shape[0], dtype=x.real.dtype, device=x.device)
+        )
+        count = count if x.dim() == 1 else count[:, None]
+        return torch.where(count > 0, total / torch.where(count > 0, count, 1.0), float("nan"))
+
+    def map_vertex_values(self, x) -> torch.Tensor:
+        """Per-vertex values of the repaired mesh on the input vertices: (V_in,) or (V_in, C).
+
+        The mean over the copies of a split vertex; NaN for dropped vertices.
+        """
+        x = torch.as_tensor(x)
+        if x.shape[0] != self.topology.num_vertices:
+            raise ValueError(
+                f"x must have {self.topology.num_vertices} rows (vertices), got {tuple(x.shape)}"
+            )
+        dtype = x.dtype if (x.is_floating_point() or x.is_complex()) else torch.float64
+        x = x.to(dtype)
+        origin = self.vertex_origin.to(x.device)
+        shape = (self.num_input_vertices,) + tuple(x.shape[1:])
+        total = torch.zeros(shape, dtype=dtype, device=x.device).index_add(0, origin, x)
+        count = torch.zeros(self.num_input_vertices, dtype=x.real.dtype, device=x.device).index_add(
+            0, origin, torch.ones(origin.shape[0], dtype=x.real.dtype, device=x.device)
+        )
+        count = count if x.dim() == 1 else count[:, None]
+        return torch.where(count > 0, total / torch.where(count > 0, count, 1.0), float("nan"))
+
+
+def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult:
+    """Turn a triangle (or polygon) soup into a mesh the operators accept, reporting every change.
+
+    In order, on copies (the input is never modified and no vertex is moved):
+
+    1. polygons are triangulated as fans from their first corner; repeated vertex indices
+       are removed from each face (what has fewer than three vertices left is dropped);
+    2. faces using a vertex with NaN or Inf coordinates are dropped;
+    3. duplicate faces (the same three vertices, in any order) are dropped, the first kept;
+    4. edges shared by more than two faces (non-manifold) are cut: each of those faces
+       keeps its own copy of the edge, a boundary edge;
+    5. each sheet (faces connected through manifold edges) is oriented consistently by
+       flipping the minority of its faces; a sheet that cannot be oriented (a Moebius
+       strip) raises ``ValueError``;
+    6. vertices whose faces then form several fans (bowties, ends of cut edges) are split,
+       one copy per fan; unreferenced vertices are dropped;
+    7. zero-area and needle faces are handled by intrinsic mollification
+       (:func:`mollify_lengths`): the edge lengths, not the positions, are changed.
+
+    Parameters
+    ----------
+    verts : (V, 3) float tensor or array
+    faces : (F, 3) or (F, k) integer tensor or array, or a sequence of index sequences
+        (polygons of any sizes)
+    mollify_factor : float >= 0, the margin of the triangle inequality relative to the
+        mean edge length
+
+    Returns
+    -------
+    :class:`RepairResult`
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes or dtypes, indices out of range, nothing left, or a non-orientable
+        sheet (naming its faces).
+    """
+    v, out_dtype = _positions(verts)
+    nv = v.shape[0]
+    tri, origin, report, polys, sides = _triangulate(faces, nv)
+    report.input_vertices = nv
+    report.input_faces = len(polys)
+    dropped_tri: dict[str, np.ndarray] = {}
+
+    def drop(mask: np.ndarray, why: str):
+        nonlocal tri, origin
+        if mask.any():
+            dropped_tri[why] = np.concatenate([dropped_tri.get(why, np.zeros(0, np.int64)), origin[mask]])
+            tri, origin = tri[~mask], origin[~mask]
+
+    finite = np.isfinite(v).all(1)
+    if not finite.all():
+        report.nonfinite_vertices = np.flatnonzero(~finite).tolist()
+        drop((~finite[tri]).any(1), "a vertex with NaN or Inf coordinates")
+    # duplicates, the first occurrence kept
+    if len(tri):
+        _, first, inverse = np.unique(np.sort(tri, axis=1), axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        dup = first[inverse] != np.arange(len(tri))
+        if dup.any():
+            report.duplicate_faces = [
+                (int(a), int(b)) for a, b in zip(origin[dup], origin[first[inverse[dup]]]) if a != b
+            ]
+            drop(dup, "duplicate of another face")
+    present = np.zeros(report.input_faces, dtype=bool)
+    present[origin] = True
+    for why, fs in dropped_tri.items():
+        for f in np.unique(fs).tolist():
+            if not present[f] and f not in report.dropped_faces:
+                report.dropped_faces[f] = why
+    for f in np.flatnonzero(~present).tolist():
+        report.dropped_faces.setdefault(
+            f, "repeated vertex indices" if len(polys[f]) >= 3 else "fewer than 3 vertices"
+        )
+    if len(tri) == 0:
+        raise ValueError("repair: no faces left (all were dropped: " + report.summary() + ")")
+
+    tri, flipped = _orient(tri, origin, nv, report)
+    new_faces, vertex_origin = _split_vertices(tri, nv, report)
+    used = np.zeros(nv, dtype=bool)
+    used[tri.ravel()] = True
+    report.unreferenced_vertices = np.flatnonzero(~used).tolist()
+    try:
+        topo = Topology(torch.from_numpy(new_faces), num_vertices=len(vertex_origin))
+    except ValueError as err:  # not expected: every check above makes a valid topology
+        raise ValueError(f"repair could not make a manifold mesh: {err}") from err
+
+    new_verts = torch.from_numpy(v[vertex_origin]).to(out_dtype)
+    e = topo.edges
+    lengths = torch.linalg.vector_norm(new_verts[e[:, 1]] - new_verts[e[:, 0]], dim=-1)
+    lengths, eps, moll = mollify_lengths(lengths, topo.face_edges, mollify_factor)
+    report.epsilon = float(eps)
+    report.delta = (
+        float(mollify_factor * lengths.mean())
+        if report.epsilon == 0
+        else float(mollify_factor * (lengths - eps).mean())
+    )
+    report.mollified_faces = moll.tolist()
+    report.num_vertices, report.num_faces, report.num_edges = (
+        topo.num_vertices,
+        topo.num_faces,
+        topo.num_edges,
+    )
+    report.components = _component_counts(topo, flipped, moll.numpy())
+
+    result = RepairResult(
+        verts=new_verts,
+        faces=topo.faces,
+        vertex_origin=torch.from_numpy(vertex_origin),
+        face_origin=torch.from_numpy(origin.copy()),
+        flipped=torch.from_numpy(flipped),
+        topology=topo,
+        edge_lengths=lengths,
+        epsilon=report.epsilon,
+        report=report,
+        input_edges=torch.from_numpy(sides),
+        num_input_faces=report.input_faces,
+        num_input_vertices=nv,
+    )
+    if report.changed:
+        log.info("%s", report)
+    return result
+
+
+def _positions(verts) -> tuple[np.ndarray, torch.dtype]:
+    if isinstance(verts, torch.Tensor):
+        if not verts.is_floating_point():
+            raise ValueError(f"verts must have a floating dtype, got {verts.dtype}")
+        dtype = verts.dtype
+        v = verts.detach().cpu().numpy().astype(np.float64)
+    else:
+        arr = np.asarray(verts)
+        if not np.issubdtype(arr.dtype, np.floating):
+            raise ValueError(f"verts must have a floating dtype, got {arr.dtype}")
+        dtype = torch.float32 if arr.dtype == np.float32 else torch.float64
+        v = arr.astype(np.float64)  # a copy
+    if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] == 0:
+        raise ValueError(f"verts must have shape (V, 3) with V >= 1, got {tuple(v.shape)}")
+    return v, dtype
+
+
+def _triangulate(faces, nv: int):
+    """Fan triangles of the polygons, without repeated indices: (T, 3), origin (T,), report, polygons."""
+    report = RepairReport()
+    if isinstance(faces, torch.Tensor):
+        faces = faces.detach().cpu().numpy()
+    if isinstance(faces, np.ndarray):
+        if faces.ndim != 2 or (faces.size and not np.issubdtype(faces.dtype, np.integer)):
+            raise ValueError(
+                f"faces must be an (F, k) integer array, got shape {faces.shape}, dtype {faces.dtype}"
+            )
+        polys: Sequence = list(faces.astype(np.int64))
+    else:
+        try:
+            polys = [np.asarray(p) for p in faces]
+        except TypeError as err:
+            raise ValueError(
+                f"faces must be an (F, k) array or a sequence of index sequences: {err}"
+            ) from err
+        for i, p in enumerate(polys):
+            if p.ndim != 1 or (p.size and not np.issubdtype(p.dtype, np.integer)):
+                raise ValueError(f"face {i} is not a sequence of integer vertex indices: {p!r}")
+        polys = [p.astype(np.int64) for p in polys]
+    if not polys:
+        raise ValueError("the mesh is empty: faces has no rows")
+    sizes = np.array([len(p) for p in polys])
+    flat = np.concatenate(polys) if sizes.sum() else np.zeros(0, np.int64)
+    bad = (flat < 0) | (flat >= nv)
+    if bad.any():
+        owner = np.repeat(np.arange(len(polys)), sizes)
+        raise ValueError(
+            f"faces have vertex indices outside [0, {nv}) at faces "
+            f"[{list_some(np.unique(owner[bad]).tolist())}]"
+        )
+    tris, origins, sides = [], [], []
+    uniform = isinstance(faces, np.ndarray)
+    for k in np.unique(sizes):
+        if k < 3:
+            continue
+        rows = np.flatnonzero(sizes == k)
+        block = faces.astype(np.int64) if uniform else np.stack([polys[i] for i in rows])
+        srt = np.sort(block, axis=1)
+        repeated = (srt[:, 1:] == srt[:, :-1]).any(1)
+        clean, crow = block[~repeated], rows[~repeated]
+        if k > 3:
+            report.triangulated_faces += crow.tolist()
+        for j in range(1, k - 1):
+            tris.append(clean[:, [0, j, j + 1]])
+            origins.append(crow)
+        sides += [clean[:, [j, (j + 1) % k]] for j in range(k)]
+        for i in rows[repeated].tolist():
+            report.repeated_index_faces.append(i)
+            p = polys[i]
+            keep = [p[0]] + [p[m] for m in range(1, len(p)) if p[m] != p[m - 1]]
+            while len(keep) > 1 and keep[-1] == keep[0]:
+                keep.pop()
+            if len(keep) > 3:
+                report.triangulated_faces.append(i)
+            if len(keep) > 1:
+                sides.append(np.array([[keep[m], keep[(m + 1) % len(keep)]] for m in range(len(keep))]))
+            for j in range(1, len(keep) - 1):
+                t = (keep[0], keep[j], keep[j + 1])
+                if len(set(t)) == 3:  # a non-consecutive repeat leaves a degenerate fan triangle
+                    tris.append(np.array([t], dtype=np.int64))
+                    origins.append(np.array([i]))
+    report.repeated_index_faces.sort()
+    report.triangulated_faces.sort()
+    if tris:
+        tri, origin = np.concatenate(tris), np.concatenate(origins)
+        order = np.argsort(origin, kind="stable")  # triangles in the order of their faces
+        tri, origin = tri[order], origin[order]
+    else:
+        tri, origin = np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    report.added_triangles = int(len(tri) - len(np.unique(origin)))
+    pairs = np.concatenate(sides).reshape(-1, 2) if sides else np.zeros((0, 2), np.int64)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    sides_out = np.unique(np.sort(pairs, axis=1), axis=0).astype(np.int64)
+    return np.ascontiguousarray(tri), origin.astype(np.int64), report, polys, sides_out
+
+
+def _edge_groups(tri: np.ndarray, nv: int):
+    """Half-edges (3 f + k, opposite corner k) grouped by undirected edge."""
+    src, dst = tri[:, [1, 2, 0]].ravel(), tri[:, [2, 0, 1]].ravel()
+    keys = np.minimum(src, dst) * nv + np.maximum(src, dst)
+    uniq, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    order = np.argsort(inverse, kind="stable")
+    start = np.cumsum(counts) - counts
+    return src, dst, uniq, counts, order, start
+
+
+def _orient(tri: np.ndarray, origin: np.ndarray, nv: int, report: RepairReport):
+    """Cut non-manifold edges (report them) and orient each sheet by flipping its minority."""
+    nt = len(tri)
+    src, dst, uniq, counts, order, start = _edge_groups(tri, nv)
+    many = counts > 2
+    report.non_manifold_edges = [(int(k // nv), int(k % nv)) for k in uniq[many]]
+    two = np.flatnonzero(counts == 2)
+    h1, h2 = order[start[two]], order[start[two] + 1]
+    f1, f2 = h1 // 3, h2 // 3
+    same = src[h1] == src[h2]  # both faces run the edge the same way: one must flip
+    # a virtual root joined to every face makes one breadth-first search orient all sheets
+    graph = sp.coo_matrix((np.ones(len(two)), (f1, f2)), shape=(nt, nt)).tocsr()
+    ncomp, labels = connected_components(graph, directed=False)
+    roots = np.unique(labels, return_index=True)[1]
+    rows = np.concatenate([f1, f2, np.full(len(roots), nt)])
+    cols = np.concatenate([f2, f1, roots])
+    full = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(nt + 1, nt + 1)).tocsr()
+    bfs, pred = breadth_first_order(full, nt, directed=True, return_predecessors=True)
+    # parity of each face relative to its predecessor, then along the tree by pointer doubling
+    pair_keys = np.concatenate([f1 * (nt + 1) + f2, f2 * (nt + 1) + f1])
+    pair_same = np.concatenate([same, same])
+    srt = np.argsort(pair_keys)
+    pair_keys, pair_same = pair_keys[srt], pair_same[srt]
+    p = pred[:nt].astype(np.int64)
+    tree = p < nt
+    step = np.zeros(nt, dtype=bool)
+    q = np.searchsorted(pair_keys, np.arange(nt)[tree] * (nt + 1) + p[tree])
+    step[tree] = pair_same[q]
+    parity, jump = step.copy(), np.where(tree, p, -1)
+    while (jump >= 0).any():
+        live = jump >= 0
+        parity[live] ^= parity[jump[live]]
+        nxt = np.full(nt, -1)
+        nxt[live] = jump[jump[live]]
+        jump = nxt
+    conflict = (parity[f1] ^ parity[f2]) != same
+    if conflict.any():
+        comp = np.unique(labels[f1[conflict]])
+        faces_bad = np.flatnonzero(np.isin(labels, comp))
+        edges_bad = [(int(k // nv), int(k % nv)) for k in uniq[two[conflict]]]
+        raise ValueError(
+            f"repair: {len(comp)} sheet(s) cannot be oriented (non-orientable, like a Moebius strip): "
+            f"input faces [{list_some(np.unique(origin[faces_bad]).tolist())}], "
+            f"where the orientation conflicts across edges [{list_some(edges_bad)}]"
+        )
+    size = np.bincount(labels, minlength=ncomp)
+    odd = np.bincount(labels, weights=parity, minlength=ncomp)
+    flip = parity ^ (2 * odd > size)[labels]
+    tri = tri.copy()
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+    report.flipped_faces = np.unique(origin[flip]).tolist()
+    del bfs
+    return tri, flip
+
+
+def _split_vertices(tri: np.ndarray, nv: int, report: RepairReport):
+    """One vertex per fan: corners joined across manifold (two-face) edges; returns faces and origins."""
+    nt = len(tri)
+    src, dst, uniq, counts, order, start = _edge_groups(tri, nv)
+    two = np.flatnonzero(counts == 2)
+    h1, h2 = order[start[two]], order[start[two] + 1]
+    f1, f2 = h1 // 3, h2 // 3
+    k1, k2 = h1 % 3, h2 % 3
+    # in face f the half-edge opposite corner k runs from corner k+1 to corner k+2; after
+    # orientation the other face runs it backwards, from its corner k'+2 to k'+1
+    a1, b1 = 3 * f1 + (k1 + 1) % 3, 3 * f1 + (k1 + 2) % 3
+    a2, b2 = 3 * f2 + (k2 + 2) % 3, 3 * f2 + (k2 + 1) % 3
+    corner_vertex = tri.ravel()
+    ok = (corner_vertex[a1] == corner_vertex[a2]) & (corner_vertex[b1] == corner_vertex[b2])
+    rows = np.concatenate([a1[ok], b1[ok]])
+    cols = np.concatenate([a2[ok], b2[ok]])
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * nt, 3 * nt))
+    _, labels = connected_components(graph, directed=False)
+    first = np.full(labels.max() + 1, 3 * nt, dtype=np.int64)
+    np.minimum.at(first, labels, np.arange(3 * nt))
+    group_vertex = corner_vertex[first]
+    order_groups = np.lexsort((first, group_vertex))
+    new_index = np.empty_like(order_groups)
+    new_index[order_groups] = np.arange(len(order_groups))
+    faces = new_index[labels].reshape(nt, 3)
+    vertex_origin = group_vertex[order_groups]
+    copies = np.bincount(vertex_origin, minlength=nv)
+    split = np.flatnonzero(copies > 1)
+    report.split_vertices = {int(i): int(copies[i]) for i in split}
+    on_cut = np.zeros(nv, dtype=bool)
+    for a, b in report.non_manifold_edges:
+        on_cut[a] = on_cut[b] = True
+    report.non_manifold_vertices = [int(i) for i in split if not on_cut[i]]
+    return faces.astype(np.int64), vertex_origin.astype(np.int64)
+
+
+def _component_counts(topo: Topology, flipped: np.ndarray, mollified: np.ndarray) -> list[dict]:
+    labels = topo.components.numpy()
+    face_label = labels[topo.faces.numpy()[:, 0]]
+    nc = topo.num_components
+    faces = np.bincount(face_label, minlength=nc)
+    verts = np.bincount(labels[labels >= 0], minlength=nc)
+    e = topo.edges.numpy()
+    edge_label = labels[e[:, 0]]
+    edges = np.bincount(edge_label, minlength=nc)
+    boundary = np.bincount(edge_label[topo.boundary_edges.numpy()], minlength=nc)
+    flips = np.bincount(face_label[flipped], minlength=nc)
+    moll = np.bincount(face_label[mollified], minlength=nc) if len(mollified) else np.zeros(nc, int)
+    return [
+        {
+            "faces": int(faces[c]),
+            "euler": int(verts[c] - edges[c] + faces[c]),
+            "boundary_edges": int(boundary[c]),
+            "flipped": int(flips[c]),
+            "mollified": int(moll[c]),
+        }
+        for c in range(nc)
+    ]

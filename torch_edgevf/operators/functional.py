@@ -5,6 +5,13 @@ float64; gradients flow back to them) and a :class:`~torch_edgevf.mesh.topology.
 faces array, from which one is built). The sparsity patterns are computed once per
 topology and cached on it; re-assembly for new positions is a gather and a scatter.
 
+Where positions cannot be trusted (zero-area faces, or a mesh known only by its edge
+lengths), pass a :class:`~torch_edgevf.mesh.geometry.FaceGeometry` in place of ``verts``,
+e.g. ``FaceGeometry.from_edge_lengths(lengths, topo)`` or the mollified
+``repair(verts, faces).geometry``: every operator depends only on edge lengths, corner
+angles and the transport between the edges of a face, which is the corner angle, so all of
+them are intrinsic, and differentiable in the lengths.
+
 Per face, with corners ``a, b`` and third corner ``c``, lengths ``l`` of the opposite
 edges, area ``A``, signs ``delta`` and transport ``r_ab`` (:func:`transport_coefficients`):
 

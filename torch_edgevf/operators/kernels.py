@@ -129,10 +129,28 @@ def laplace_beltrami_plan(topo: Topology):
 
 
 def prepare(verts, topo) -> tuple[torch.Tensor, Topology, FaceGeometry, torch.Tensor]:
+    """Positions (or a geometry standing in for them), topology, face geometry and signs.
+
+    ``verts`` may be a :class:`FaceGeometry` (e.g. :meth:`FaceGeometry.from_edge_lengths`):
+    it is then returned in place of the positions and used as the geometry.
+    """
+    if isinstance(verts, FaceGeometry):
+        topo = intrinsic_topology(verts, topo)
+        signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
+        return verts, topo, verts, signs  # type: ignore[return-value]
     verts, topo = topology_and_verts(verts, topo)
     geom = face_geometry(verts, topo)
     signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
     return verts, topo, geom, signs
+
+
+def intrinsic_topology(geom: FaceGeometry, topo) -> Topology:
+    """The topology of a :class:`FaceGeometry` used in place of positions, checked against it."""
+    if not isinstance(topo, Topology):
+        topo = Topology(topo)
+    if geom.num_faces != topo.num_faces:
+        raise ValueError(f"the geometry has {geom.num_faces} faces but the topology {topo.num_faces}")
+    return topo
 
 
 def mass_values(geom: FaceGeometry, topo: Topology) -> torch.Tensor:
