@@ -5,8 +5,7 @@ imported inside the functions, and only the Agg canvas is used (no pyplot, no di
 global backend switch), so rendering works on servers and in threads.
 
 The renderer is a small orthographic painter: vertices are projected on the image plane of
-a camera placed at elevation ``elev`` and azimuth ``azim`` (degrees, as in matplotlib's 3D
-axes, with ``up`` the world's vertical), faces are drawn back to front with a Lambert shade
+a camera (:class:`Camera`), faces are drawn back to front with a Lambert shade
 
 .. math::  c_T = c \\, \\big(a + (1 - a) \\max(0, N_T \\cdot \\ell)\\big),
 
@@ -21,6 +20,19 @@ and the overlays are
   where the point is visible (a ray test against the projected faces);
 * checkerboards (:func:`render_parametrization`): each face subdivided, each small
   triangle coloured by the parity of ``floor(s u) + floor(s v)`` at its centroid.
+
+The camera is chosen from the mesh unless given (:func:`choose_camera`): ``up="auto"``
+takes the side an open surface faces (a terrain is seen from above), else the normal of a
+flat mesh, else ``+y``, the usual vertical of OBJ files; ``view="auto"`` then takes, among
+views from 25 degrees above the horizon (40 for open and flat meshes), the one with the
+largest front-facing projected area. Both accept an axis (``"y"``, ``"-z"``) or a
+3-vector, ``elev``/``azim`` (degrees about ``up``) override the view, and ``camera`` a
+whole :class:`Camera`.
+
+Glyphs and checkerboards adapt to the picture: one glyph per cell of ``glyph_spacing``
+pixels of the image (the nearest visible face in the cell), as long as the cell or the
+face, whichever is smaller; checker squares sized so that about ``checker_cells`` of them
+span the mesh's largest dimension.
 
 Every function takes tensors (or arrays), writes a PNG, and returns its path.
 """
@@ -39,11 +51,13 @@ from .mesh.topology import Topology
 
 __all__ = [
     "Camera",
+    "choose_camera",
     "render_mesh",
     "render_field",
     "render_singularities",
     "render_parametrization",
     "face_glyph_directions",
+    "checker_scale",
 ]
 
 log = logging.getLogger(__name__)
@@ -56,6 +70,8 @@ _NEGATIVE = (0.85, 0.10, 0.10)
 _CHECKER = ((0.95, 0.95, 0.95), (0.20, 0.35, 0.75))
 _AMBIENT = 0.3
 _SUPERSAMPLE = 3
+_DEFAULT_SIZE = (800, 600)
+_AXIS_NAMES = {"x": 0, "y": 1, "z": 2}
 
 
 # --------------------------------------------------------------------------- camera
@@ -105,6 +121,20 @@ class Camera:
         self.right = right
         self.upward = np.cross(self.view, self.right)
 
+    @classmethod
+    def from_view(cls, view, up=(0.0, 0.0, 1.0)) -> Camera:
+        """The camera in direction ``view`` (from the scene towards the camera) with ``up`` vertical."""
+        up_v, view_v = _unit(up, "up"), _unit(view, "view")
+        helper = np.array([1.0, 0.0, 0.0]) if abs(up_v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        a = helper - helper.dot(up_v) * up_v
+        a /= np.linalg.norm(a)
+        b = np.cross(up_v, a)
+        if up_v[2] > 0.9:
+            a, b = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+        elev = math.degrees(math.asin(float(np.clip(view_v @ up_v, -1.0, 1.0))))
+        azim = math.degrees(math.atan2(float(view_v @ b), float(view_v @ a)))
+        return cls(elev, azim, up_v)
+
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Image coordinates ``(P, 2)`` and depth ``(P,)`` (larger is nearer the camera)."""
         return np.stack([points @ self.right, points @ self.upward], axis=-1), points @ self.view
@@ -115,9 +145,111 @@ class Camera:
         return l / np.linalg.norm(l)
 
 
-def _camera(camera, elev, azim, up) -> Camera:
+def _unit(x, name: str) -> np.ndarray:
+    """A unit 3-vector from an axis name (``"y"``, ``"-z"``) or three numbers."""
+    if isinstance(x, str):
+        t = x.strip().lower()
+        sign = -1.0 if t.startswith("-") else 1.0
+        axis = _AXIS_NAMES.get(t.lstrip("+-"))
+        if axis is None:
+            raise ValueError(
+                f"{name} must be 'auto', an axis name (x, y, z, -x, ...) or a 3-vector, got {x!r}"
+            )
+        out = np.zeros(3)
+        out[axis] = sign
+        return out
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape != (3,) or not np.isfinite(a).all() or np.linalg.norm(a) == 0:
+        raise ValueError(f"{name} must be a nonzero 3-vector or an axis name, got {x!r}")
+    return a / np.linalg.norm(a)
+
+
+def _snap(d: np.ndarray, degrees: float = 20.0) -> np.ndarray:
+    """``d`` replaced by the nearest signed world axis when within ``degrees`` of it."""
+    k = int(np.argmax(np.abs(d)))
+    if abs(d[k]) >= math.cos(math.radians(degrees)):
+        out = np.zeros(3)
+        out[k] = math.copysign(1.0, d[k])
+        return out
+    return d
+
+
+def _auto_up(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The vertical chosen for a mesh, and whether the mesh is open or flat."""
+    p = v[f]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    total = max(float(area2.sum()), 1e-300)
+    facing = cross.sum(axis=0) / total  # mean unit normal, area-weighted; 0 for closed meshes
+    if np.linalg.norm(facing) > 0.3:  # an open surface turned mostly one way (a terrain)
+        return _snap(facing / np.linalg.norm(facing)), True
+    center = p.mean(axis=1)
+    mean = (area2[:, None] * center).sum(0) / total
+    d = center - mean
+    values, vectors = np.linalg.eigh((area2[:, None] * d).T @ d / total)
+    if values[0] < 0.35**2 * values[1]:  # flat: the thin direction is vertical
+        normal = vectors[:, 0]
+        if normal @ facing < 0 or (abs(normal @ facing) < 1e-3 and normal[np.argmax(np.abs(normal))] < 0):
+            normal = -normal
+        return _snap(normal), True
+    return np.array([0.0, 1.0, 0.0]), False
+
+
+def choose_camera(verts, faces, *, up="auto", view="auto", elev=None, azim=None) -> Camera:
+    """The camera the render functions use by default.
+
+    Parameters
+    ----------
+    verts : (V, 3) tensor
+    faces : (F, 3) integer tensor or Topology
+    up : ``"auto"``, an axis name (``"x"``, ``"-z"``, ...) or a 3-vector. ``"auto"``: for an
+        open surface whose area-weighted mean normal is large (a terrain) that direction,
+        for a flat mesh (smallest principal extent below 0.35 of the middle one) its normal,
+        otherwise ``+y``, the usual vertical of OBJ files; directions within 20 degrees of
+        a world axis snap to it.
+    view : ``"auto"``, an axis name or a 3-vector from the mesh towards the camera.
+        ``"auto"``: elevation 25 degrees (40 for open or flat meshes) and the azimuth, in
+        steps of 15 degrees, with the largest front-facing projected area.
+    elev, azim : degrees about ``up`` (see :class:`Camera`); either one replaces the
+        automatic choice of that angle (not allowed with an explicit ``view``).
+
+    Returns
+    -------
+    Camera
+    """
+    _, _, v, f = _mesh(verts, faces)
+    return _choose_camera(v, f, up, view, elev, azim)
+
+
+def _choose_camera(v, f, up, view, elev, azim) -> Camera:
+    for name, value in (("elev", elev), ("azim", azim)):
+        if value is not None and (
+            not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value)
+        ):
+            raise ValueError(f"{name} must be a finite number of degrees, got {value!r}")
+    auto_up = isinstance(up, str) and up == "auto"
+    auto_view = isinstance(view, str) and view == "auto"
+    if not auto_view and (elev is not None or azim is not None):
+        raise ValueError("give either view or elev/azim, not both")
+    up_v, open_or_flat = _auto_up(v, f) if auto_up else (_unit(up, "up"), False)
+    if not auto_view:
+        return Camera.from_view(_unit(view, "view"), up_v)
+    if elev is None:
+        elev = 40.0 if open_or_flat else 25.0
+    if azim is None:
+        p = v[f]
+        cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        candidates = np.arange(0.0, 360.0, 15.0)
+        views = np.stack([Camera(elev, a, up_v).view for a in candidates])
+        # twice the projected area of the faces turned towards each candidate
+        score = np.maximum(cross @ views.T, 0.0).sum(axis=0)
+        azim = float(candidates[int(np.argmax(score))])
+    return Camera(elev, azim, up_v)
+
+
+def _camera(camera, v, f, up, view, elev, azim) -> Camera:
     if camera is None:
-        return Camera(elev, azim, up)
+        return _choose_camera(v, f, up, view, elev, azim)
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a torch_edgevf.render.Camera, got {type(camera).__name__}")
     return camera
@@ -163,6 +295,21 @@ class _Scene:
         # polygons drawn in order of (face depth, layer): a face, then what lies on it
         self.items: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]] = []
         self.markers: list[tuple[np.ndarray, float, object]] = []
+        self.overlay: list[tuple[np.ndarray, np.ndarray]] = []  # polygons on top of every face
+        self.frame((1, 1))
+
+    def frame(self, size: tuple[int, int], top: int = 0) -> None:
+        """Fit the drawing to an image of ``size`` (width, height) less ``top`` pixels for a title.
+
+        Sets the limits (``mid``, ``half``) and ``pixel``, the world length of a pixel.
+        """
+        w, h = size
+        top = min(top, h // 4)
+        lo, hi = self.xy.min(axis=0), self.xy.max(axis=0)
+        half_w = max((hi - lo)[0] / 2, (hi - lo)[1] / 2 * w / (h - top), 1e-12) * 1.06
+        self.pixel = 2 * half_w / w
+        self.half = np.array([half_w, half_w * h / w])
+        self.mid = (lo + hi) / 2 + np.array([0.0, top / 2 * self.pixel])
 
     def add_faces(self, face_color=None):
         colors = self.face_color if face_color is None else face_color
@@ -203,7 +350,12 @@ class _Scene:
     def add_marker(self, xy: np.ndarray, radius: float, color):
         self.markers.append((xy, radius, color))
 
-    def draw(self, path, size: int, dpi: int, background, title: str | None, edges: bool) -> Path:
+    def add_overlay(self, polys: np.ndarray, colors) -> None:
+        """Polygons ``(P, k, 2)`` drawn over every face, in the given order."""
+        colors = np.broadcast_to(np.asarray(colors, dtype=np.float64), (len(polys), 3))
+        self.overlay.append((polys, colors))
+
+    def draw(self, path, size: tuple[int, int], dpi: int, background, title: str | None, edges: bool) -> Path:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.collections import PolyCollection
         from matplotlib.figure import Figure
@@ -221,7 +373,7 @@ class _Scene:
         is_face = layers[order] == 0
 
         ss = _SUPERSAMPLE
-        fig = Figure(figsize=(size / dpi, size / dpi), dpi=dpi * ss, facecolor=background)
+        fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi * ss, facecolor=background)
         canvas = FigureCanvasAgg(fig)
         ax = fig.add_axes((0, 0, 1, 1))
         ax.set_axis_off()
@@ -237,6 +389,12 @@ class _Scene:
             antialiased=False,
         )
         ax.add_collection(coll)
+        for over, over_colors in self.overlay:
+            ax.add_collection(
+                PolyCollection(
+                    list(over), facecolors=over_colors, edgecolors="none", antialiased=False, zorder=2
+                )
+            )
         for xy, radius, color in self.markers:
             ax.add_patch(
                 Circle(
@@ -248,10 +406,9 @@ class _Scene:
                     zorder=3,
                 )
             )
-        lo, hi = self.xy.min(axis=0), self.xy.max(axis=0)
-        mid, half = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-12) * 1.06
-        ax.set_xlim(mid[0] - half, mid[0] + half)
-        ax.set_ylim(mid[1] - half, mid[1] + half)
+        self.frame(size, 24 if title else 0)
+        ax.set_xlim(self.mid[0] - self.half[0], self.mid[0] + self.half[0])
+        ax.set_ylim(self.mid[1] - self.half[1], self.mid[1] + self.half[1])
         ax.set_aspect("equal")
         if title:
             ax.text(0.02, 0.98, title, transform=ax.transAxes, va="top", ha="left", fontsize=9)
@@ -274,11 +431,18 @@ class _Scene:
         return path
 
 
-def _check_image(size, dpi):
-    if not isinstance(size, int) or isinstance(size, bool) or not 16 <= size <= 8192:
-        raise ValueError(f"size must be an integer number of pixels in [16, 8192], got {size!r}")
+def _check_image(size, dpi) -> tuple[int, int]:
+    """``size`` (an int for a square, or (width, height)) as (width, height)."""
+    pair = (size, size) if isinstance(size, int) else tuple(size) if isinstance(size, (tuple, list)) else ()
+    if len(pair) != 2 or not all(
+        isinstance(x, int) and not isinstance(x, bool) and 16 <= x <= 8192 for x in pair
+    ):
+        raise ValueError(
+            f"size must be a number of pixels or a (width, height) pair, each in [16, 8192], got {size!r}"
+        )
     if not isinstance(dpi, int) or isinstance(dpi, bool) or dpi <= 0:
         raise ValueError(f"dpi must be a positive integer, got {dpi!r}")
+    return pair
 
 
 def render_mesh(
@@ -286,11 +450,12 @@ def render_mesh(
     faces,
     path,
     *,
-    elev: float = 20.0,
-    azim: float = -60.0,
-    up=(0.0, 0.0, 1.0),
+    up="auto",
+    view="auto",
+    elev: float | None = None,
+    azim: float | None = None,
     camera: Camera | None = None,
-    size: int = 800,
+    size: int | tuple[int, int] = _DEFAULT_SIZE,
     dpi: int = 100,
     edges: bool = False,
     face_colors=None,
@@ -304,8 +469,8 @@ def render_mesh(
     verts : (V, 3) tensor
     faces : (F, 3) integer tensor or Topology
     path : where to write the PNG
-    elev, azim, up : camera (see :class:`Camera`), or ``camera`` itself
-    size : image width and height in pixels
+    up, view, elev, azim : the camera (see :func:`choose_camera`), or ``camera`` itself
+    size : image width and height in pixels, ``(width, height)`` or one number for a square
     edges : draw the mesh edges
     face_colors : optional (F, 3) RGB in [0, 1] (shaded by the Lambert term)
 
@@ -313,9 +478,9 @@ def render_mesh(
     -------
     pathlib.Path of the PNG.
     """
-    _check_image(size, dpi)
+    size = _check_image(size, dpi)
     _, topo, v, f = _mesh(verts, faces)
-    scene = _Scene(v, f, _camera(camera, elev, azim, up))
+    scene = _Scene(v, f, _camera(camera, v, f, up, view, elev, azim))
     scene.add_faces(_face_colors(scene, face_colors, topo))
     return scene.draw(path, size, dpi, background, title, edges)
 
@@ -376,6 +541,74 @@ def _glyph_polygons(center, normal, dirs, length, n):
     return np.stack(quad, axis=2).reshape(-1, 4, 3)
 
 
+def _check_glyph_options(glyph_spacing, glyph_scale, every) -> None:
+    if not isinstance(every, int) or isinstance(every, bool) or every < 1:
+        raise ValueError(f"every must be a positive integer, got {every!r}")
+    if not isinstance(glyph_scale, (int, float)) or not glyph_scale > 0 or not math.isfinite(glyph_scale):
+        raise ValueError(f"glyph_scale must be a positive number, got {glyph_scale!r}")
+    if glyph_spacing is not None and (
+        not isinstance(glyph_spacing, (int, float)) or not math.isfinite(glyph_spacing) or glyph_spacing < 2
+    ):
+        raise ValueError(f"glyph_spacing must be a number of pixels >= 2 or None, got {glyph_spacing!r}")
+
+
+def _glyph_faces(scene: _Scene, candidates: np.ndarray, spacing: float | None) -> np.ndarray:
+    """Of the faces ``candidates``, the nearest one per square cell of ``spacing`` pixels."""
+    if spacing is None or not candidates.size:
+        return candidates
+    cell = spacing * scene.pixel
+    xy, depth = scene.cam.project(scene.center[candidates])
+    ij = np.floor((xy - scene.mid) / cell).astype(np.int64)
+    key = (ij[:, 0] - ij[:, 0].min()) * (int(ij[:, 1].max() - ij[:, 1].min()) + 1) + (
+        ij[:, 1] - ij[:, 1].min()
+    )
+    order = np.lexsort((-depth, key))  # by cell, nearest first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = key[order][1:] != key[order][:-1]
+    return np.sort(candidates[order[first]])
+
+
+def _add_glyphs(
+    scene: _Scene, verts_t, topo, z, n, spacing, glyph_scale, scale_by_magnitude, every, color
+) -> None:
+    """Glyphs of the field ``z`` on the visible faces, one per screen cell (see render_field)."""
+    _check_glyph_options(spacing, glyph_scale, every)
+    dirs = face_glyph_directions(verts_t, topo, z, n).detach().cpu().to(torch.float64).numpy()
+    mag = np.linalg.norm(dirs[:, 0], axis=-1)
+    unit = dirs / np.where(mag > 0, mag, 1.0)[:, None, None]
+    face_edge = np.linalg.norm(scene.p - scene.p[:, [1, 2, 0]], axis=-1).mean(axis=1)  # (F,)
+    keep = scene.front & (np.arange(len(scene.f)) % every == 0)
+    if scale_by_magnitude:
+        top = mag.max()
+        rel = mag / top if top > 0 else np.zeros_like(mag)
+        keep &= rel > 1e-3
+    else:
+        rel = np.ones_like(mag)
+        keep &= mag > 0
+    idx = np.flatnonzero(keep)
+    if spacing is not None and idx.size:
+        # one face per screen cell; its glyph, as long as the cell, goes over every face
+        # where its barycenter is visible (drawn in the face's painter slot, a glyph
+        # longer than its face would be cut by the neighbours drawn after it)
+        idx = _glyph_faces(scene, idx, spacing)
+        idx = idx[scene.visible(scene.center[idx], scene.normal[idx], tol=0.5 * face_edge[idx].mean())]
+        reach = np.full(len(idx), spacing * scene.pixel)
+    else:
+        reach = face_edge[idx]
+    if not idx.size:
+        return
+    length = 0.8 * glyph_scale * reach * rel[idx]
+    lift = 1e-3 * face_edge[idx, None] * scene.normal[idx]  # keep the glyph on the visible side
+    quads = _glyph_polygons(scene.center[idx] + lift, scene.normal[idx], unit[idx], length[:, None, None], n)
+    polys = scene.cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2)
+    if spacing is None:
+        scene.add_polygons(np.repeat(idx, n), polys, np.asarray(color, dtype=np.float64), layer=1)
+    else:
+        order = np.argsort(np.repeat(scene.face_depth[idx], n), kind="stable")
+        scene.add_overlay(polys[order], color)
+    log.info("glyphs on %d of %d faces", len(idx), len(scene.f))
+
+
 def render_field(
     verts,
     faces,
@@ -383,12 +616,14 @@ def render_field(
     path,
     n: int = 1,
     *,
-    elev: float = 20.0,
-    azim: float = -60.0,
-    up=(0.0, 0.0, 1.0),
+    up="auto",
+    view="auto",
+    elev: float | None = None,
+    azim: float | None = None,
     camera: Camera | None = None,
-    size: int = 800,
+    size: int | tuple[int, int] = _DEFAULT_SIZE,
     dpi: int = 100,
+    glyph_spacing: float | None = 14.0,
     glyph_scale: float = 1.0,
     scale_by_magnitude: bool = False,
     every: int = 1,
@@ -410,49 +645,30 @@ def render_field(
     z : (E,) complex tensor, the representation vector (the field itself for ``n = 1``)
     path : where to write the PNG
     n : symmetry order
-    glyph_scale : glyph length in units of ``0.8 x`` the mean edge length
+    up, view, elev, azim : the camera (see :func:`choose_camera`), or ``camera`` itself
+    size : image width and height in pixels, ``(width, height)`` or one number for a square
+    glyph_spacing : pixels between glyphs: the image is cut in square cells of this size
+        and each cell shows the glyph of the nearest visible face whose barycenter falls
+        in it, so that the density on screen does not depend on the mesh resolution.
+        ``None``: a glyph on every visible face.
+    glyph_scale : glyph length in units of ``0.8 x`` the smaller of the cell and the
+        face's mean edge length
     scale_by_magnitude : glyph length proportional to ``|w_T|`` / its maximum
         (else every glyph has the same length)
-    every : draw glyphs on every ``every``-th face only (dense meshes)
+    every : consider every ``every``-th face only
 
     Returns
     -------
     pathlib.Path of the PNG.
     """
-    _check_image(size, dpi)
-    if not isinstance(every, int) or isinstance(every, bool) or every < 1:
-        raise ValueError(f"every must be a positive integer, got {every!r}")
-    if not isinstance(glyph_scale, (int, float)) or not glyph_scale > 0 or not math.isfinite(glyph_scale):
-        raise ValueError(f"glyph_scale must be a positive number, got {glyph_scale!r}")
+    size = _check_image(size, dpi)
     verts_t, topo, v, f = _mesh(verts, faces)
-    dirs = face_glyph_directions(verts_t, topo, z, n).detach().cpu().to(torch.float64).numpy()
-    scene = _Scene(v, f, _camera(camera, elev, azim, up))
+    scene = _Scene(v, f, _camera(camera, v, f, up, view, elev, azim))
+    scene.frame(size)
     scene.add_faces()
-    mag = np.linalg.norm(dirs[:, 0], axis=-1)
-    unit = dirs / np.where(mag > 0, mag, 1.0)[:, None, None]
-    edge_len = np.linalg.norm(scene.p - scene.p[:, [1, 2, 0]], axis=-1).mean()
-    length = 0.8 * edge_len * glyph_scale
-    keep = scene.front & (np.arange(len(f)) % every == 0)
-    if scale_by_magnitude:
-        top = mag.max()
-        rel = mag / top if top > 0 else np.zeros_like(mag)
-        keep &= rel > 1e-3
-    else:
-        rel = np.ones_like(mag)
-        keep &= mag > 0
-    idx = np.flatnonzero(keep)
-    if idx.size:
-        lift = 1e-3 * edge_len * scene.normal[idx]  # keep the glyph on the visible side
-        quads = _glyph_polygons(
-            scene.center[idx] + lift, scene.normal[idx], unit[idx], (length * rel[idx])[:, None, None], n
-        )
-        owners = np.repeat(idx, n)
-        scene.add_polygons(
-            owners,
-            scene.cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
-            np.asarray(glyph_color, dtype=np.float64),
-            layer=1,
-        )
+    _add_glyphs(
+        scene, verts_t, topo, z, n, glyph_spacing, glyph_scale, scale_by_magnitude, every, glyph_color
+    )
     return scene.draw(path, size, dpi, background, title, edges)
 
 
@@ -480,13 +696,15 @@ def render_singularities(
     *,
     z=None,
     n: int = 1,
-    elev: float = 20.0,
-    azim: float = -60.0,
-    up=(0.0, 0.0, 1.0),
+    up="auto",
+    view="auto",
+    elev: float | None = None,
+    azim: float | None = None,
     camera: Camera | None = None,
-    size: int = 800,
+    size: int | tuple[int, int] = _DEFAULT_SIZE,
     dpi: int = 100,
     marker_scale: float = 1.0,
+    glyph_spacing: float | None = 14.0,
     edges: bool = False,
     background="white",
     title: str | None = None,
@@ -504,22 +722,28 @@ def render_singularities(
     face_index : (F,) indices (e.g. :attr:`Singularities.face_index`), optional
     vertex_index : (V,) indices, optional
     z : optional (E,) representation vector, also drawn as glyphs (with ``n``)
+    up, view, elev, azim : the camera (see :func:`choose_camera`), or ``camera`` itself
+    size : image width and height in pixels, ``(width, height)`` or one number for a square
+    marker_scale : marker radius in units of 5 pixels (up to twice that for the
+        largest ``|index|``)
+    glyph_spacing : pixels between the glyphs of ``z`` (see :func:`render_field`)
 
     Returns
     -------
     pathlib.Path of the PNG.
     """
-    _check_image(size, dpi)
+    size = _check_image(size, dpi)
+    if not isinstance(marker_scale, (int, float)) or not math.isfinite(marker_scale) or marker_scale <= 0:
+        raise ValueError(f"marker_scale must be a positive number, got {marker_scale!r}")
     verts_t, topo, v, f = _mesh(verts, faces)
     fi = _index_vector(face_index, topo.num_faces, "face_index")
     vi = _index_vector(vertex_index, topo.num_vertices, "vertex_index")
-    cam = _camera(camera, elev, azim, up)
-    if z is not None:
-        # draw the field first, through the same scene
-        scene = _field_scene(verts_t, topo, v, f, z, n, cam)
-    else:
-        scene = _Scene(v, f, cam)
-        scene.add_faces()
+    cam = _camera(camera, v, f, up, view, elev, azim)
+    scene = _Scene(v, f, cam)
+    scene.frame(size)
+    scene.add_faces()
+    if z is not None:  # the field's glyphs under the markers
+        _add_glyphs(scene, verts_t, topo, z, n, glyph_spacing, 1.0, False, 1, _GLYPH_COLOR)
     edge_len = np.linalg.norm(scene.p - scene.p[:, [1, 2, 0]], axis=-1).mean()
     points, normals, values = [], [], []
     if fi is not None:
@@ -538,8 +762,7 @@ def render_singularities(
     if points:
         pts, nrm, val = np.concatenate(points), np.concatenate(normals), np.concatenate(values)
         shown = scene.visible(pts, nrm, tol=0.5 * edge_len)
-        extent = float((scene.xy.max(axis=0) - scene.xy.min(axis=0)).max())
-        radius = 0.014 * extent * marker_scale
+        radius = 5.0 * marker_scale * scene.pixel
         xy = cam.project(pts)[0]
         smallest = max(float(np.abs(val).min()), 1e-12)
         for k in np.flatnonzero(shown):
@@ -547,31 +770,6 @@ def render_singularities(
             scene.add_marker(xy[k], r, _POSITIVE if val[k] > 0 else _NEGATIVE)
         log.info("%d of %d singular regions visible", int(shown.sum()), len(pts))
     return scene.draw(path, size, dpi, background, title, edges)
-
-
-def _field_scene(verts_t, topo, v, f, z, n, cam) -> _Scene:
-    dirs = face_glyph_directions(verts_t, topo, z, n).detach().cpu().to(torch.float64).numpy()
-    scene = _Scene(v, f, cam)
-    scene.add_faces()
-    mag = np.linalg.norm(dirs[:, 0], axis=-1)
-    unit = dirs / np.where(mag > 0, mag, 1.0)[:, None, None]
-    edge_len = np.linalg.norm(scene.p - scene.p[:, [1, 2, 0]], axis=-1).mean()
-    idx = np.flatnonzero(scene.front & (mag > 0))
-    if idx.size:
-        quads = _glyph_polygons(
-            scene.center[idx] + 1e-3 * edge_len * scene.normal[idx],
-            scene.normal[idx],
-            unit[idx],
-            0.8 * edge_len,
-            n,
-        )
-        scene.add_polygons(
-            np.repeat(idx, n),
-            cam.project(quads.reshape(-1, 3))[0].reshape(-1, 4, 2),
-            np.asarray(_GLYPH_COLOR),
-            layer=1,
-        )
-    return scene
 
 
 # --------------------------------------------------------------------------- parametrization
@@ -592,19 +790,44 @@ def _subdivision(k: int):
     return out
 
 
+def checker_scale(verts, faces, uv, cells: float = 15.0) -> float:
+    """Checker squares per unit of uv for about ``cells`` squares across the mesh.
+
+    The ratio ``r`` of summed uv to summed 3D edge lengths (per face, so seams and the
+    layout of charts do not matter) turns the largest dimension ``D`` of the bounding box
+    into a uv length ``r D``; the scale ``cells / (r D)`` is rounded to an integer when
+    above 1, else to ``1/k``.
+    """
+    v = np.asarray(torch.as_tensor(verts).detach().cpu(), dtype=np.float64)
+    f = np.asarray(
+        faces.faces if isinstance(faces, Topology) else torch.as_tensor(faces).cpu(), dtype=np.int64
+    )
+    uv = np.asarray(torch.as_tensor(uv).detach().cpu(), dtype=np.float64)
+    p = v[f]
+    xyz_len = np.linalg.norm(p - p[:, [1, 2, 0]], axis=-1).sum()
+    uv_len = np.linalg.norm(uv - uv[:, [1, 2, 0]], axis=-1).sum()
+    extent = float((v.max(axis=0) - v.min(axis=0)).max())
+    if not (xyz_len > 0 and uv_len > 0 and extent > 0):
+        return 1.0
+    raw = cells / (uv_len / xyz_len * extent)
+    return float(max(1, round(raw))) if raw >= 1 else 1.0 / max(1, round(1 / raw))
+
+
 def render_parametrization(
     verts,
     faces,
     uv,
     path,
     *,
-    scale: float = 8.0,
-    subdivide: int = 4,
-    elev: float = 20.0,
-    azim: float = -60.0,
-    up=(0.0, 0.0, 1.0),
+    scale: float | str = "auto",
+    subdivide: int | str = "auto",
+    checker_cells: float = 15.0,
+    up="auto",
+    view="auto",
+    elev: float | None = None,
+    azim: float | None = None,
     camera: Camera | None = None,
-    size: int = 800,
+    size: int | tuple[int, int] = _DEFAULT_SIZE,
     dpi: int = 100,
     colors=_CHECKER,
     edges: bool = False,
@@ -623,18 +846,36 @@ def render_parametrization(
     faces : (F, 3) integer tensor or Topology
     uv : (F, 3, 2) per-corner parameters (seams allowed)
     path : where to write the PNG
-    scale : checker squares per unit of ``u`` and ``v``
-    subdivide : sub-triangles per face edge (1: one colour per face, at its barycenter)
+    scale : checker squares per unit of ``u`` and ``v``. ``"auto"``: about
+        ``checker_cells`` squares across the mesh's largest dimension, from the ratio of
+        the uv to the 3D edge lengths (seams and chart layout do not matter); rounded to an
+        integer when above 1 (or to ``1/k``), so that squares of an integer-seamless
+        parametrization meet along seams.
+    subdivide : sub-triangles per face edge (1: one colour per face, at its barycenter).
+        ``"auto"``: about 12 sub-triangles across a square, none smaller than 2 pixels,
+        at most 16.
+    checker_cells : squares across the mesh for ``scale="auto"``
+    up, view, elev, azim : the camera (see :func:`choose_camera`), or ``camera`` itself
+    size : image width and height in pixels, ``(width, height)`` or one number for a square
 
     Returns
     -------
     pathlib.Path of the PNG.
     """
-    _check_image(size, dpi)
-    if not isinstance(subdivide, int) or isinstance(subdivide, bool) or not 1 <= subdivide <= 64:
-        raise ValueError(f"subdivide must be an integer in [1, 64], got {subdivide!r}")
-    if not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale <= 0:
-        raise ValueError(f"scale must be a positive number, got {scale!r}")
+    size = _check_image(size, dpi)
+    if subdivide != "auto" and (
+        not isinstance(subdivide, int) or isinstance(subdivide, bool) or not 1 <= subdivide <= 64
+    ):
+        raise ValueError(f"subdivide must be 'auto' or an integer in [1, 64], got {subdivide!r}")
+    if scale != "auto" and (
+        not isinstance(scale, (int, float))
+        or isinstance(scale, bool)
+        or not math.isfinite(scale)
+        or scale <= 0
+    ):
+        raise ValueError(f"scale must be 'auto' or a positive number, got {scale!r}")
+    if not isinstance(checker_cells, (int, float)) or not math.isfinite(checker_cells) or checker_cells <= 0:
+        raise ValueError(f"checker_cells must be a positive number, got {checker_cells!r}")
     _, topo, v, f = _mesh(verts, faces)
     uv = np.asarray(torch.as_tensor(uv).detach().cpu(), dtype=np.float64)
     if uv.shape != (topo.num_faces, 3, 2):
@@ -642,8 +883,19 @@ def render_parametrization(
     bad = np.flatnonzero(~np.isfinite(uv).reshape(len(uv), -1).all(1))
     if bad.size:
         raise ValueError(f"uv has NaN or Inf values at faces [{list_some(bad)}]")
-    scene = _Scene(v, f, _camera(camera, elev, azim, up))
-    sub = _subdivision(subdivide)  # (T, 3, 3)
+    scene = _Scene(v, f, _camera(camera, v, f, up, view, elev, azim))
+    scene.frame(size)
+    uv_edge = np.linalg.norm(uv - uv[:, [1, 2, 0]], axis=-1)  # (F, 3)
+    if scale == "auto":
+        scale = checker_scale(v, f, uv, checker_cells)
+    scale = float(scale)
+    if subdivide == "auto":
+        squares_per_face = float(np.median(uv_edge.mean(axis=1))) * scale
+        face_pixels = float(np.median(np.linalg.norm(scene.face_xy - scene.face_xy[:, [1, 2, 0]], axis=-1)))
+        finest = max(1, min(16, math.ceil(face_pixels / scene.pixel / 2)))  # sub-triangles >= 2 pixels
+        subdivide = int(np.clip(math.ceil(12 * squares_per_face), 1, finest))
+        log.info("checker scale %g, %d sub-triangles per face edge", scale, subdivide)
+    sub = _subdivision(int(subdivide))  # (T, 3, 3)
     centroid = sub.mean(axis=1)  # (T, 3)
     uvc = np.einsum("tk,fkd->ftd", centroid, uv)  # (F, T, 2)
     parity = np.floor(scale * uvc).sum(-1).astype(np.int64) % 2  # (F, T)
