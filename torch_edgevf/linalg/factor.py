@@ -11,7 +11,8 @@ Back-ends
     complex64 matrices are factored in double and the solutions cast back.
 ``"superlu-hermitian"``
     SciPy SuperLU in *symmetric mode* (ordering ``MMD_AT_PLUS_A`` applied to rows and
-    columns, diagonal pivots): for a Hermitian positive definite matrix this is an
+    columns, diagonal pivots, no relaxed supernodes: see :data:`SYMMETRIC_MODE`): for a
+    Hermitian positive definite matrix this is an
     :math:`LDL^H` factorization, so positive definiteness is checked on the pivots.  It
     is the Cholesky path when scikit-sparse is not installed (pip-only installs), and is
     2.2x faster than SuperLU's default mode on the connection Laplacian.
@@ -58,7 +59,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from ._utils import is_hermitian
+from ._utils import _blas_controller, is_hermitian
 
 logger = logging.getLogger(__name__)
 
@@ -73,6 +74,28 @@ METHODS = ("auto", "cholesky", "lu")
 #: 1.0 s vs 0.75-1.1 s, one solve 21 ms vs 44 ms.  The iterative solvers make tens to
 #: hundreds of solves per factorization, so the solve speed decides.
 CHOLMOD_MODE = "simplicial"
+
+
+#: ``scipy.sparse.linalg.splu`` options of the symmetric mode (``"superlu-hermitian"``):
+#: ordering ``MMD_AT_PLUS_A`` applied to rows and columns, diagonal pivots, and no relaxed
+#: supernodes (``relax=1``).  With SuperLU's default relaxation (small subtrees of the
+#: elimination tree amalgamated into dense blocks), the time depended on the numbering of
+#: the input, not on the fill: :math:`L_c + 0.1 M_z` of ``trimesh.creation.icosphere(5)``
+#: took 30-50 s to factor against 0.3-0.5 s for :func:`torch_edgevf.icosphere` (5), with
+#: the same 1,336,558 entries in the factors, and each solve 2-10x longer; a subdivided
+#: ``trimesh.creation.box`` was 7-10x slower than SciPy's default ``splu``.  Almost all of
+#: it went to the dense panel updates.  (In symmetric mode SuperLU does not postorder the
+#: elimination tree, while its relaxed supernodes are found on a postorder and mapped back
+#: to the column order.)  Without relaxation both icospheres factor in the same time, and
+#: nothing is lost on the library's meshes (icosphere 5: 0.63 s against 0.64 s); the
+#: fundamental supernodes SuperLU finds during the factorization are kept.  The times
+#: against SciPy's default on generated meshes are in ``benchmarks/bench_linalg.py``.
+SYMMETRIC_MODE = {
+    "permc_spec": "MMD_AT_PLUS_A",
+    "diag_pivot_thresh": 0.0,
+    "relax": 1,
+    "options": {"SymmetricMode": True},
+}
 
 
 @functools.cache
@@ -158,11 +181,12 @@ class _SuperLUFactor(_Factor):
         super().__init__(K)
         self.hermitian = hermitian
         self.backend = "superlu-hermitian" if hermitian else "superlu"
-        kwargs = {}
-        if hermitian:
-            kwargs = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+        kwargs = SYMMETRIC_MODE if hermitian else {}
         try:
-            self._lu = sla.splu(K, **kwargs)
+            # SuperLU's dense kernels are small matrix-vector products: BLAS threads only
+            # add synchronisation (on a busy machine, most of the time)
+            with _blas_controller().limit(limits=1, user_api="blas"):
+                self._lu = sla.splu(K, **kwargs)
         except RuntimeError as err:
             if "singular" in str(err).lower():
                 raise _singular_error(str(err)) from err
