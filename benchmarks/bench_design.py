@@ -1,4 +1,4 @@
-"""Issue 4: time to the smoothest 4-direction field, next to one Cholesky factorization.
+"""Time to the smoothest 4-direction field, next to one Cholesky factorization.
 
 Run from the repository root::
 

@@ -1,4 +1,4 @@
-"""Issue 3: torch_edgevf.linalg against SciPy on the connection Laplacian.
+"""torch_edgevf.linalg against SciPy on the connection Laplacian.
 
 Run from the repository root::
 
@@ -20,7 +20,7 @@ installed, and the pip-only SuperLU path) it times
   sigma)``: SciPy's default shift-invert (SuperLU with its default options on ``A - sigma
   M``, ARPACK; for a complex matrix the non-Hermitian Arnoldi), with the same shift and the
   same tolerance (``tol=1e-13``, the default of ``torch_edgevf.linalg.eigsh`` in double
-  precision) and with SciPy's own default ``tol=0`` (machine precision; issue 3's reference),
+  precision) and with SciPy's own default ``tol=0`` (machine precision; the reference),
   both interleaved with ours, and one BLAS thread, like ours;
 * the single smallest eigenpair vs one factorization (``SparseSolver(M_z + L_c)``);
 * the solve backward vs one solve with the existing factor: the backward of linalg's
@@ -33,7 +33,7 @@ Paired measurements are interleaved (ours, reference, ours, ...) ``--repeats`` t
 (at least 5 times for the eigensolves on meshes up to 50,000 edges, which take about a
 second and vary by up to 50% on a shared virtual machine, both ours and SciPy's) and the
 best of each is kept, so that their ratio is robust to the load of a shared machine; the
-load average is reported.  Issue 3's targets: ``k`` eigenpairs <= 0.5 x SciPy, the
+load average is reported.  The targets: ``k`` eigenpairs <= 0.5 x SciPy, the
 smallest pair <= 2 x one factorization, solve backward <= 1.5 x one solve, eigenvalue
 backward <= 0.2 x the forward.
 """
@@ -343,7 +343,7 @@ def main():
             )
         )
     lines = [
-        "## torch_edgevf.linalg benchmark (issue 3)",
+        "## torch_edgevf.linalg benchmark",
         "",
         f"Machine: {info['cores']} cores ({info['cpu']}); "
         f"load average {[round(x, 2) for x in load0]} at start, "

@@ -1,4 +1,4 @@
-"""Issue 2: assembly, re-assembly, matvec and memory of the edge-based operators.
+"""Assembly, re-assembly, matvec and memory of the edge-based operators.
 
 Run from the repository root::
 
@@ -15,7 +15,7 @@ memory figure) and one for the peers (libigl, scipy). For each mesh it times
 * libigl's scalar Crouzeix-Raviart Laplacian + mass (the same sparsity as ``L_c``), with
   and without its edge map (``igl.unique_edge_map``), and ``cotmatrix + massmatrix``;
 
-and reports medians, the ratios of issue 2 against their targets, and peak RSS.
+and reports medians, the ratios against their targets, and peak RSS.
 Peer packages: ``pip install -r benchmarks/requirements.txt``.
 """
 
@@ -338,7 +338,7 @@ def report(cases: list[str], results: dict, info: dict) -> str:
     ]
     mem = info.get("memory_bytes")
     lines = [
-        "## torch_edgevf operator benchmark (issue 2)",
+        "## torch_edgevf operator benchmark",
         "",
         f"Machine: {info['cores']} cores ({info['cpu']}), {fmt_bytes(mem)} RAM, {info['platform']}; "
         f"load average at start {info.get('load_average')}.",

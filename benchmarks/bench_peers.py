@@ -1,4 +1,4 @@
-"""Issue 7: accuracy and speed side by side with peer libraries.
+"""Accuracy and speed side by side with peer libraries.
 
 Run from the repository root::
 

@@ -21,7 +21,7 @@ from torch_edgevf.io import (
 
 MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 
-# /work/shared/meshes/README.md: V, F, Euler characteristic, boundary edges
+# shared/meshes/README.md (next to the repository): V, F, Euler characteristic, boundary edges
 MESH_TABLE = {
     "spot_low_resolution.obj": (829, 1654, 2, 0),
     "spot.obj": (11533, 23062, 2, 0),
