@@ -135,3 +135,18 @@ def open_mesh():
 
 def dense(a: torch.Tensor) -> np.ndarray:
     return a.detach().to_dense().numpy()
+
+
+@pytest.fixture(params=["fast", pytest.param("full", marks=pytest.mark.slow)])
+def gradcheck(request):
+    """``torch.autograd.gradcheck`` in two lanes: the whole Jacobian in the slow lane, and in
+    the default lane its fast mode, which compares the analytical and numerical Jacobians
+    along random directions (``v^T J u``, real and imaginary parts for complex
+    functions): the same identity, one projection instead of every entry."""
+    fast = request.param == "fast"
+
+    def check(fn, inputs, **kwargs):
+        kwargs.setdefault("fast_mode", fast)
+        return torch.autograd.gradcheck(fn, inputs, **kwargs)
+
+    return check
