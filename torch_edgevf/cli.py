@@ -157,11 +157,11 @@ def _smallest_eigenvalues(A, M, k):
 
 
 def cmd_demo(args) -> int:
+    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
+    _check_output(args.png, (".png",), "--png")
     from . import EdgeOperators, singularities, smoothest_field
     from .render import render_singularities
 
-    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
-    _check_output(args.png, (".png",), "--png")
     step = _Progress(3 + bool(args.png), args.quiet)
     mesh = _load(args.mesh)
     print(f"mesh: {_mesh_name(args.mesh)}, {mesh.verts.shape[0]} vertices, {mesh.faces.shape[0]} faces")
@@ -230,13 +230,13 @@ def _design(mesh, n: int, align: str):
 
 
 def cmd_design(args) -> int:
+    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
+    _check_output(args.output, FIELD_SUFFIXES, "-o")
+    _check_output(args.png, (".png",), "--png")
     from . import singularities
     from .io import save_field
     from .render import render_singularities
 
-    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
-    _check_output(args.output, FIELD_SUFFIXES, "-o")
-    _check_output(args.png, (".png",), "--png")
     step = _Progress(2 + bool(args.png), args.quiet)
     mesh = _load(args.mesh)
     step(
@@ -265,15 +265,15 @@ def cmd_design(args) -> int:
 
 
 def cmd_singularities(args) -> int:
-    from . import singularities
-    from .io import load_field
-    from .render import render_singularities
-
     if args.field and args.mesh:
         raise ValueError("give either a MESH or --field, not both")
     _check_input(args.mesh, MESH_SUFFIXES, "mesh")
     _check_input(args.field, FIELD_SUFFIXES, "field file")
     _check_output(args.png, (".png",), "--png")
+    from . import singularities
+    from .io import load_field
+    from .render import render_singularities
+
     step = _Progress(1 + (not args.field) + bool(args.png), args.quiet)
     if args.field:
         data = load_field(args.field)
@@ -308,11 +308,11 @@ def cmd_singularities(args) -> int:
 
 
 def cmd_param(args) -> int:
+    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
+    _check_output(args.png, (".png",), "--png")
     from .fields.param import parametrize
     from .render import render_parametrization
 
-    _check_input(args.mesh, MESH_SUFFIXES, "mesh")
-    _check_output(args.png, (".png",), "--png")
     step = _Progress(2 + bool(args.png), args.quiet)
     mesh = _load(args.mesh)
     step(f"designing the {'curvature-aligned' if args.align == 'curvature' else 'smoothest'} cross field")

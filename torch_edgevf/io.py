@@ -62,6 +62,7 @@ __all__ = [
     "MeshReport",
     "FieldData",
     "load_mesh",
+    "read_triangles",
     "save_mesh",
     "default_mesh",
     "save_field",
@@ -101,11 +102,36 @@ class MeshReport:
     duplicate_faces: int = 0
     unreferenced_vertices: int = 0
     notes: list[str] = field(default_factory=list)
+    #: faces (in the order of the file's records) with a repeated vertex index: the repeats
+    #: were removed, and those left with fewer than three vertices dropped
+    repeated_index_faces: list[int] = field(default_factory=list)
+    #: polygons of the file (record indices) split into triangles by the reader
+    triangulated_faces: list[int] = field(default_factory=list)
+    #: vertices (file indices) with NaN or Inf coordinates
+    nonfinite_vertices: list[int] = field(default_factory=list)
 
     @property
     def triangulated(self) -> bool:
-        """Whether the file had polygons that trimesh split into triangles."""
-        return self.file_faces is not None and self.loaded_faces > self.file_faces
+        """Whether the file had polygons that were split into triangles."""
+        return bool(self.triangulated_faces) or (
+            self.file_faces is not None and self.loaded_faces > self.file_faces
+        )
+
+    @property
+    def problems(self) -> list[str]:
+        """The changes that alter the surface (not only its storage), for :func:`diagnose` and ``info``."""
+        out = []
+        if self.repeated_index_faces:
+            out.append(
+                f"{len(self.repeated_index_faces)} faces with a repeated vertex index (repeats removed;"
+                " a face left with fewer than 3 vertices is dropped, which can open a hole) at faces"
+                f" [{_list_some(self.repeated_index_faces)}]"
+            )
+        elif self.degenerate_faces:
+            out.append(f"{self.degenerate_faces} faces with a repeated vertex index dropped")
+        if self.duplicate_faces:
+            out.append(f"{self.duplicate_faces} duplicate faces dropped")
+        return out
 
     @property
     def dropped_faces(self) -> int:
@@ -116,13 +142,23 @@ class MeshReport:
         if self.file_vertices is not None or self.file_faces is not None:
             lines.append(f"  file states {self.file_vertices} vertices, {self.file_faces} faces")
         lines.append(
-            f"  trimesh read {self.loaded_vertices} vertices, {self.loaded_faces} triangles"
+            f"  read {self.loaded_vertices} vertices, {self.loaded_faces} triangles"
             f" from {self.geometries} geometr{'y' if self.geometries == 1 else 'ies'}"
         )
-        if self.triangulated:
+        if self.triangulated_faces:
+            lines.append(
+                f"  triangulated polygons: {self.file_faces} faces -> {self.loaded_faces} triangles"
+                f" ({len(self.triangulated_faces)} polygons split into fans from their first corner)"
+            )
+        elif self.triangulated:
             lines.append(
                 f"  triangulated polygons: {self.file_faces} faces -> {self.loaded_faces} triangles"
                 " (face order may differ from the file)"
+            )
+        if self.repeated_index_faces:
+            lines.append(
+                f"  {len(self.repeated_index_faces)} faces with a repeated vertex index, repeats removed:"
+                f" file faces [{_list_some(self.repeated_index_faces)}]"
             )
         lines.append(
             f"  merged {self.merged_vertices} vertices with identical positions;"
@@ -187,18 +223,19 @@ def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> M
         )
     if not path.is_file():
         raise ValueError(f"cannot read mesh {path}: no such file")
-    report = MeshReport(path=str(path), format=fmt)
-    if fmt == "stl":
-        _check_stl(path)
-    verts, faces = _read_trimesh(path, report)
-    report.file_vertices, report.file_faces = _stated_counts(path, fmt)
-    report.loaded_vertices, report.loaded_faces = len(verts), len(faces)
-    if not np.all(np.isfinite(verts)):
+    verts, faces, report = read_triangles(path)
+    finite = np.isfinite(verts).all(1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite).tolist()
         raise ValueError(
-            f"cannot read mesh {path}: {int((~np.isfinite(verts).all(1)).sum())} vertices are not finite"
+            f"cannot read mesh {path}: {len(bad)} vertices are not finite (NaN or Inf coordinates),"
+            f" at vertices [{_list_some(bad)}] (edgevf info lists every problem; repair drops their faces)"
         )
     if faces.size and (faces.min() < 0 or faces.max() >= len(verts)):
-        raise ValueError(f"cannot read mesh {path}: face indices outside [0, {len(verts)})")
+        out = np.flatnonzero(((faces < 0) | (faces >= len(verts))).any(1)).tolist()
+        raise ValueError(
+            f"cannot read mesh {path}: a face index outside [0, {len(verts)}) at faces [{_list_some(out)}]"
+        )
 
     if merge:
         verts, faces = _merge_identical(verts, faces, report)
@@ -216,9 +253,203 @@ def load_mesh(path, dtype: torch.dtype = torch.float64, merge: bool = True) -> M
             " unreferenced ones (the reader skips them) or repeated positions (merged)"
         )
 
-    level = logging.WARNING if report.dropped_faces or report.triangulated else logging.INFO
+    level = (
+        logging.WARNING if report.dropped_faces or report.triangulated or report.problems else logging.INFO
+    )
     log.log(level, "%s", report)
     return MeshData(torch.from_numpy(verts).to(dtype), torch.from_numpy(faces), report)
+
+
+def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, MeshReport]:
+    """The vertices and triangles of a mesh file as they are, before any clean-up.
+
+    Nothing is checked, merged or dropped: NaN coordinates, indices out of range,
+    duplicates and non-manifold configurations come back as the file holds them (for
+    :func:`~torch_edgevf.mesh.repair.repair` and ``edgevf info``). Polygons are split into
+    fans of triangles from their first corner after their repeated vertex indices are
+    removed (both recorded in the report, with the file's face indices); triangle strips
+    of PLY files are unrolled.
+
+    With ``merge``, vertices with bitwise-identical finite positions are merged as by
+    :func:`load_mesh` (vertices with NaN or Inf coordinates are never merged).
+
+    Returns
+    -------
+    verts : (V, 3) float64 array
+    faces : (T, 3) int64 array
+    report : :class:`MeshReport`, ``loaded_*`` and ``nonfinite_vertices`` (file indices)
+        filled in
+    """
+    path = Path(path)
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in MESH_FORMATS:
+        raise ValueError(
+            f"cannot read mesh {path}: unsupported extension {path.suffix!r}, expected one of {MESH_FORMATS}"
+        )
+    if not path.is_file():
+        raise ValueError(f"cannot read mesh {path}: no such file")
+    report = MeshReport(path=str(path), format=fmt)
+    if fmt == "stl":
+        _check_stl(path)
+    polygons = _read_off(path) if fmt == "off" else None
+    if polygons is not None:
+        verts, polys = polygons
+        faces = _triangulate_polygons(polys, len(verts), report, path)
+    else:
+        try:
+            verts, faces = _read_trimesh(path, report)
+        except ValueError:
+            strips = _read_ply_strips(path) if fmt == "ply" else None
+            if strips is None:
+                raise
+            verts, faces = strips
+            report.notes.append(f"unrolled triangle strips into {len(faces)} triangles")
+    report.file_vertices, report.file_faces = _stated_counts(path, fmt)
+    report.loaded_vertices, report.loaded_faces = len(verts), len(faces)
+    finite = np.isfinite(verts).all(1)
+    report.nonfinite_vertices = np.flatnonzero(~finite).tolist()
+    if merge:
+        keys = verts + 0.0
+        bad = np.flatnonzero(~finite)
+        keys[bad] = np.column_stack([np.full(len(bad), np.inf), bad, np.zeros(len(bad))])  # each apart
+        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        order = np.argsort(first)
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        report.merged_vertices = len(verts) - len(first)
+        inside = (faces >= 0) & (faces < len(verts))
+        faces = np.where(inside, rank[inverse.reshape(-1)][np.where(inside, faces, 0)], faces)
+        verts = verts[first[order]]
+    report.num_vertices, report.num_faces = len(verts), len(faces)
+    return verts, faces, report
+
+
+def _triangulate_polygons(polys, nv: int, report: MeshReport, path) -> np.ndarray:
+    from .mesh.repair import triangulate
+
+    tri, origin, tri_report = triangulate(polys, nv, check=False)
+    report.triangulated_faces = tri_report.triangulated_faces
+    report.repeated_index_faces = tri_report.repeated_index_faces
+    report.degenerate_faces = len(polys) - len(np.unique(origin))
+    if len(tri) == 0:
+        raise ValueError(
+            f"cannot read mesh {path}: no triangle faces found (every face has fewer than 3 vertices)"
+        )
+    return tri
+
+
+def _read_off(path: Path):
+    """Vertices and polygons of an ASCII OFF file, or None for another variant (binary).
+
+    Records are read as tokens, so a record may wrap over several lines; what follows the
+    last number of a record on its line (colours, normals) is skipped. ``#`` starts a
+    comment. Header variants ``OFF``, ``COFF``, ``NOFF``, ``STOFF``... with the counts on
+    the header line or the next.
+    """
+    text = path.read_bytes().decode("latin-1")
+    lines = [line.split("#", 1)[0].split() for line in text.splitlines()]
+    tokens = [(i, t) for i, words in enumerate(lines) for t in words]
+    if (
+        not tokens
+        or not tokens[0][1].upper().endswith("OFF")
+        or "BINARY" in {t.upper() for _, t in tokens[:3]}
+    ):
+        return None
+    header = tokens[0][1].upper()
+    pos = 1
+
+    def number(kind):
+        nonlocal pos
+        if pos >= len(tokens):
+            raise ValueError(f"cannot read mesh {path}: the OFF file ends inside the {kind} records")
+        line, tok = tokens[pos]
+        pos += 1
+        return line, tok
+
+    def skip_line(line):
+        nonlocal pos
+        while pos < len(tokens) and tokens[pos][0] == line:
+            pos += 1
+
+    try:
+        dim = 4 if header.startswith("4") or "4OFF" in header else 3
+        counts = [int(number("header")[1]) for _ in range(3)]
+        nv, nf = counts[0], counts[1]
+        verts = np.empty((nv, 3), dtype=np.float64)
+        extras = header != "OFF"  # COFF, NOFF, STOFF...: per-vertex data after the coordinates
+        for i in range(nv):
+            coords = [number("vertex") for _ in range(dim)]
+            verts[i] = [float(t) for _, t in coords[:3]]
+            if extras:
+                skip_line(coords[-1][0])
+        polys = []
+        for _ in range(nf):
+            line, tok = number("face")
+            k = int(tok)
+            idx = [number("face") for _ in range(k)]
+            polys.append(np.array([int(t) for _, t in idx], dtype=np.int64))
+            last = idx[-1][0] if idx else line
+            rest = [t for ln, t in tokens[pos : pos + 64] if ln == last]
+            if rest and not _whole_records(rest):
+                skip_line(last)  # a colour after the indices
+    except ValueError as err:
+        if "ends inside" in str(err):
+            raise
+        raise ValueError(f"cannot read mesh {path}: not a valid OFF file ({err})") from err
+    if nf == 0:
+        raise ValueError(f"cannot read mesh {path}: it is a point cloud ({nv} points, no faces)")
+    return verts, polys
+
+
+def _whole_records(words: list[str]) -> bool:
+    """Whether ``words`` are complete face records ``k i_1 .. i_k`` (not a colour)."""
+    i = 0
+    while i < len(words):
+        if not words[i].isdigit():
+            return False
+        i += int(words[i]) + 1
+    return i == len(words)
+
+
+def _read_ply_strips(path: Path):
+    """Vertices and the triangles of the ``tristrips`` element of a PLY file, or None.
+
+    Strips restart at ``-1``; triangle ``k`` of a strip is ``(s_k, s_k+1, s_k+2)`` with every
+    other one reversed to keep the winding; the degenerate triangles that join strips are
+    left out.
+    """
+    from trimesh.exchange import ply
+
+    try:
+        with open(path, "rb") as fh:
+            elements, is_ascii, _ = ply._parse_header(fh)
+            if "tristrips" not in elements or "vertex" not in elements:
+                return None
+            (ply._ply_ascii if is_ascii else ply._ply_binary)(elements, fh)
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError):
+        return None
+    vdata = elements["vertex"]["data"]
+    verts = np.column_stack([np.asarray(vdata[c], dtype=np.float64).reshape(-1) for c in "xyz"])
+    sdata = elements["tristrips"]["data"]
+    strips = sdata.get("vertex_indices", next(iter(sdata.values()))) if isinstance(sdata, dict) else sdata
+    tris = []
+    for strip in strips:
+        s = np.asarray(strip, dtype=np.int64).reshape(-1)
+        for run in np.split(s, np.flatnonzero(s < 0)):
+            run = run[run >= 0]
+            for k in range(len(run) - 2):
+                t = run[k : k + 3] if k % 2 == 0 else run[[k + 1, k, k + 2]]
+                if len(set(t.tolist())) == 3:
+                    tris.append(t)
+    if not tris:
+        return None
+    return verts, np.array(tris, dtype=np.int64)
+
+
+def _list_some(items, limit: int = 10) -> str:
+    items = list(items)
+    head = ", ".join(str(i) for i in items[:limit])
+    return head if len(items) <= limit else f"{head}, ... ({len(items)} in all)"
 
 
 def default_mesh(dtype: torch.dtype = torch.float64) -> MeshData:
@@ -399,7 +630,9 @@ def _merge_identical(verts: np.ndarray, faces: np.ndarray, report: MeshReport):
 def _drop_bad_faces(faces: np.ndarray, report: MeshReport) -> np.ndarray:
     """Drop faces with a repeated index, then repeated vertex triples (keep the first)."""
     ok = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    report.degenerate_faces = int((~ok).sum())
+    report.degenerate_faces += int((~ok).sum())
+    if not ok.all() and not report.repeated_index_faces:
+        report.repeated_index_faces = np.flatnonzero(~ok).tolist()
     faces = faces[ok]
     _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
     report.duplicate_faces = len(faces) - len(first)

@@ -33,6 +33,7 @@ __all__ = [
     "MappedEdgeField",
     "repair",
     "mollify_lengths",
+    "triangulate",
     "find_degenerate_faces",
     "repair_degenerate_faces",
 ]
@@ -620,7 +621,29 @@ def _positions(verts) -> tuple[np.ndarray, torch.dtype]:
     return v, dtype
 
 
-def _triangulate(faces, nv: int):
+def triangulate(faces, num_vertices: int, check: bool = True) -> tuple[np.ndarray, np.ndarray, RepairReport]:
+    """Fan triangulation of polygons after removing their repeated vertex indices.
+
+    The first step of :func:`repair`, also used by the file readers.
+
+    Parameters
+    ----------
+    faces : (F, k) integer array or tensor, or a sequence of index sequences
+    num_vertices : int
+    check : raise ``ValueError`` for indices outside ``[0, num_vertices)``
+
+    Returns
+    -------
+    triangles : (T, 3) int64 array
+    origin : (T,) int64 array, the face of each triangle
+    report : :class:`RepairReport` with ``triangulated_faces``, ``added_triangles`` and
+        ``repeated_index_faces`` filled in
+    """
+    tri, origin, report, _, _ = _triangulate(faces, num_vertices, check)
+    return tri, origin, report
+
+
+def _triangulate(faces, nv: int, check: bool = True):
     """Fan triangles of the polygons, without repeated indices: (T, 3), origin (T,), report, polygons."""
     report = RepairReport()
     if isinstance(faces, torch.Tensor):
@@ -647,7 +670,7 @@ def _triangulate(faces, nv: int):
     sizes = np.array([len(p) for p in polys])
     flat = np.concatenate(polys) if sizes.sum() else np.zeros(0, np.int64)
     bad = (flat < 0) | (flat >= nv)
-    if bad.any():
+    if check and bad.any():
         owner = np.repeat(np.arange(len(polys)), sizes)
         raise ValueError(
             f"faces have vertex indices outside [0, {nv}) at faces "
