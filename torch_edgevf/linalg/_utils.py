@@ -148,7 +148,7 @@ def sparse_matrix(
     the indices are already coalesced (sorted row-major, no duplicates; checked here in
     O(nnz)), the backward to ``values`` is a plain read of the gradient on the pattern,
     where torch's own constructor backward runs a ``sparse_mask`` that costs several
-    sparse solves (Spot, 173k entries: about 15 ms against a 3 ms solve).  Use it to build
+    sparse solves.  Use it to build
     matrices that are then differentiated through :func:`~torch_edgevf.linalg.solve` or
     :func:`~torch_edgevf.linalg.eigsh`.
 
@@ -177,8 +177,7 @@ def sparse_matrix(
 def check_finite(x: torch.Tensor, name: str) -> None:
     """Raise ``ValueError`` if ``x`` holds NaN or Inf.
 
-    On the CPU through NumPy: ``torch.isfinite`` on complex tensors is five times slower
-    (Spot's connection Laplacian, 173k entries: 1.6 against 0.3 ms).
+    On the CPU through NumPy, which checks complex arrays faster than ``torch.isfinite``.
     """
     x = x.detach()
     if x.device.type == "cpu" and x.dtype in _FLOAT_DTYPES:
@@ -306,8 +305,8 @@ def blas_single_thread(fn):
     """Run ``fn`` with one BLAS thread.
 
     The dense steps of the iterative solvers work on tall, thin blocks, where BLAS threads
-    only add synchronisation; on a busy machine, or beside torch's own OpenMP threads,
-    oversubscribed BLAS threads made the eigensolver 25 to 30 times slower here.
+    only add synchronisation, and on a busy machine, or beside torch's own OpenMP threads,
+    oversubscribed BLAS threads wait for each other.
     """
     import functools
 
@@ -325,8 +324,8 @@ _CONTROLLER = None
 def _blas_controller():
     """One ``threadpoolctl.ThreadpoolController`` for the process.
 
-    ``threadpool_limits`` inspects every loaded shared library on each call (about 1 ms
-    here, as much as a small solve); the controller does it once.  BLAS is loaded with
+    ``threadpool_limits`` inspects every loaded shared library on each call (as long as a
+    small solve); the controller does it once.  BLAS is loaded with
     NumPy/SciPy, long before the first call.
     """
     global _CONTROLLER

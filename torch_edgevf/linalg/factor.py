@@ -14,40 +14,27 @@ Back-ends
     columns, diagonal pivots, no relaxed supernodes: see :data:`SYMMETRIC_MODE`): for a
     Hermitian positive definite matrix this is an
     :math:`LDL^H` factorization, so positive definiteness is checked on the pivots.  It
-    is the Cholesky path when scikit-sparse is not installed (pip-only installs), and is
-    2.2x faster than SuperLU's default mode on the connection Laplacian.
+    is the Cholesky path when scikit-sparse is not installed (pip-only installs), and
+    faster than SuperLU's default mode on the connection Laplacian.
 ``"cholmod-cvxopt"``
     CHOLMOD as bundled by cvxopt's PyPI wheels (optional extra ``torch_edgevf[cvxopt]``, no
     system library; cvxopt is GPL-3 licensed), real and complex Hermitian, used when
     scikit-sparse is absent: simplicial :math:`LDL^H` for the iterative solvers' many
     solves (positive definiteness checked on ``D``), supernodal :math:`LL^H` for one-off
-    factorizations.  On Spot's :math:`L_c - \sigma M_z` it factors in 0.076 s (simplicial)
-    against 0.113 s for SuperLU symmetric mode and solves two columns in 4.9 ms against
-    5.95 ms; on icosphere 6 edges, 0.41 s (supernodal) against 0.97 s.
+    factorizations; it factors and solves faster than SuperLU symmetric mode.
 ``"cholespy"``
     CHOLMOD as bundled by cholespy (optional extra ``torch_edgevf[cholespy]``, PyPI wheels,
     no system library), real symmetric positive definite matrices only.  Used, when
     scikit-sparse is absent, for the real factorizations of the eigensolver, which makes
-    dozens to hundreds of solves per factorization: cholespy's solves are 3-4x faster than
-    SuperLU's, its factorization up to 1.7x slower (see below), so one-off solves keep
-    SuperLU.  (On an indefinite matrix its CHOLMOD prints a warning to stderr before
+    dozens to hundreds of solves per factorization: cholespy's solves are faster than
+    SuperLU's and its factorization slower, so one-off solves keep SuperLU.  (On an
+    indefinite matrix its CHOLMOD prints a warning to stderr before
     ``NotPositiveDefiniteError`` is raised.)
 ``"superlu"``
     SciPy SuperLU, general mode (``COLAMD`` ordering, partial pivoting) for
     non-Hermitian and indefinite matrices.  Keeps float32/complex64.
 
-Measured on the 122,880 x 122,880 complex Hermitian stand-in of :math:`L_c` (icosphere
-level 6, 2 cores): CHOLMOD 0.94 s (supernodal; simplicial 1.0 s, with solves twice as
-fast), SuperLU symmetric mode 1.33 s, SuperLU default 2.98 s, cholespy on the real
-2N x 2N embedding 3.09 s.  On Spot's :math:`L_c` (34,593 edges), cholespy on the
-embedding factors in 0.48 s against 0.13-0.18 s for SuperLU symmetric mode, and solves in
-5.5 ms against 4.9 ms: complex matrices stay with SuperLU.  Real SPD matrices (factor /
-one solve, 2 cores, one BLAS thread; SuperLU symmetric mode, cholespy, CHOLMOD
-simplicial): Spot's :math:`L_c^{(0)} + M_z` (34,593) 126 / 3.98 ms, 214 / 0.97 ms,
-70 / 1.45 ms; Spot's vertex :math:`L + M_v` (11,533) 156 / 2.90 ms, 210 / 1.56 ms,
-170 / 1.66 ms; icosphere 6 edges (122,880) 0.94 s / 23.3 ms, 1.13 s / 7.5 ms, 0.69 s /
-7.3 ms; icosphere 6 vertices (40,962) 1.31 s / 22.9 ms, 1.26 s / 10.3 ms, 1.46 s /
-11.6 ms.
+Timings of the back-ends are in ``benchmarks/results/linalg_notes.md``.
 """
 
 from __future__ import annotations
@@ -262,8 +249,7 @@ class _CvxoptCholmodFactor(_Factor):
     ``simplicial=True`` (the iterative solvers' many solves) gives :math:`LDL^H`, whose
     pivots ``D`` -- read with one diagonal solve -- certify positive definiteness;
     otherwise the supernodal :math:`LL^H`, which raises on a non positive definite
-    matrix and factors 2-2.5x faster on large meshes (icosphere 6 edges: 0.41 s against
-    0.99 s) while solving 1.4-1.7x slower.
+    matrix and factors faster on large meshes while solving slower.
     """
 
     backend = "cholmod-cvxopt"

@@ -61,9 +61,8 @@ _STEV = get_lapack_funcs("stev", dtype=np.float64)
 def dense_is_faster(n, k):
     """``method="auto"``: dense ``eigh`` for ``n <= 300``, or where ``k`` is a large part of
     ``n`` (``n <= 6 k``, the Lanczos basis ``3 k`` then at least half of ``n``) up to ``n =
-    4000``: 128 pairs of icosphere 3's vertex Laplacian (n = 642) took 0.055 s dense
-    against 0.156 s by Lanczos (the DiffusionNet precompute on small meshes); 128 pairs of
-    its connection Laplacian (n = 1,920, complex) 2.5 s dense against 0.55 s."""
+    4000``, where a dense decomposition of the whole matrix costs less than the Lanczos
+    basis and its reorthogonalization."""
     return n <= _DENSE_MAX or (n <= 6 * k and n <= _DENSE_MAX_MANY)
 
 
@@ -78,9 +77,7 @@ def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     the low spectrum, and shift-invert Lanczos then stalls.  The median ratio is of the
     order of the top of the spectrum, so :math:`\\epsilon` bounds the condition number of
     :math:`A - \\sigma M` for a singular ``A`` (about :math:`1/\\epsilon`); the smaller it is,
-    the closer the shift to the wanted eigenvalues and the faster the convergence: on Spot
-    (:math:`L_c`, :math:`\\lambda_1 = 5.43`), ``1e-4`` gave :math:`\\sigma = -2.86` and 19
-    solves for the smallest pair, ``1e-5`` gives :math:`\\sigma = -0.29` and 17.
+    the closer the shift to the wanted eigenvalues and the faster the convergence.
     """
     ratio = np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(M.dtype).tiny)
     scale = float(np.median(ratio)) if ratio.size else 1.0
@@ -106,11 +103,10 @@ class _Inner:
     def dot(self, V, W):
         """``V^H M W`` (``V`` has M-orthonormal or arbitrary columns).
 
-        One or two columns in ``W``: one ``gemv`` per column.  OpenBLAS's ``gemm`` with a
-        conjugated factor is 1.3-5x slower there (one column against 2 to 96 of length
-        34,593: 0.15 against 0.03 ms, 3.7 against 2.0 ms).  For blocks of more than two
-        columns as ``((M W)^H V)^H``: OpenBLAS's kernel for a transposed *small* left factor
-        reads the basis faster (2.6 against 3.4 ms for four columns against 60).
+        One or two columns in ``W``: one ``gemv`` per column, which OpenBLAS runs faster
+        than a ``gemm`` with a conjugated factor.  For blocks of more than two columns as
+        ``((M W)^H V)^H``: OpenBLAS's kernel for a transposed *small* left factor reads the
+        basis faster than the direct product.
         """
         MW = W if self.mmul is None else self.mmul(W)
         if MW.shape[1] <= 2 and V.shape[1] and MW.dtype == self.dtype:
@@ -370,12 +366,10 @@ class _TestSchedule:
     """When the block Lanczos loop tests convergence.
 
     A test is a dense eigendecomposition of the ``cols x cols`` projected matrix: about
-    ``1.5 cols^2 / n`` times the cost of a step (a small solve and the reorthogonalization;
-    complex, measured: 0.5 ms at ``cols = 50`` against 0.3-0.5 ms for a step on 3,000
-    edges, 40 ms at ``cols = 384``).  Where that exceeds one -- 128 pairs on a 3,000-edge
-    mesh, where testing after every step took three quarters of the time -- the tests are
-    spaced so that they cost about as much as the steps; where it does not -- 24 pairs on
-    Spot -- at most ``_CHEAP_TEST_GAP`` steps apart.  Either way never beyond half the
+    ``1.5 cols^2 / n`` times the cost of a step (a small solve and the reorthogonalization).
+    Where that ratio exceeds one (many pairs on a small mesh) the tests are spaced so that
+    they cost about as much as the steps; where it does not, they are at most
+    ``_CHEAP_TEST_GAP`` steps apart.  Either way never beyond half the
     number of steps that the current rate of convergence predicts are left: the worst
     ``log10(residual / bound)`` of the wanted pairs (``bound``: ``tol |theta|`` or the
     floor, see ``_FLOOR``), and its fall per step between the last two tests.  Lanczos
@@ -496,10 +490,9 @@ def _deferred_pass(W, V, H, cols, b, lo, inner: _Inner, rng, out=None):
     orthogonality along well converged Ritz vectors by about ``eps / residual``, and on
     icospheres (many pairs, clusters) it reached 1e-11 within one step.  The new block was
     then no longer orthogonal to ``Q'`` (5e-11), ``H`` drifted from Hermitian (1e-12), and
-    the pairs' true residuals were 1e-9 to 3e-7 where the estimates read 1e-13 (icosphere 3,
-    k = 128: 18,644 solves).  So beyond ``_PENDING_DRIFT eps`` the new block goes through
-    the full procedure against the corrected basis, as on a near breakdown (on Spot, k =
-    24: no measurable cost).
+    the pairs' true residuals far above their estimates.  So beyond ``_PENDING_DRIFT eps``
+    the new block goes through the full procedure against the corrected basis, as on a near
+    breakdown.
     """
     p = cols - b
     W, Cl, G, breakdown = _against_last_blocks(W, V[:, lo:cols], inner)
@@ -616,8 +609,8 @@ def _harmonic_ritz(V, alpha, betas, j, w, beta, inner: _Inner):
     smallest pair :math:`(\mu, s)` gives :math:`u = W s = V H s + s_j w`.  :math:`W`
     reaches one power of :math:`T` further than :math:`V`, and the step weighs the error by
     :math:`K` -- which is large on the directions that inverse iteration leaves for last
-    -- so the residual of :math:`u` in the original problem is typically 10-20x below that
-    of the Ritz vector (Spot's :math:`L_c`: 1.6e-12 against 3.6e-11 after 18 solves).
+    -- so the residual of :math:`u` in the original problem is typically an order of
+    magnitude below that of the Ritz vector.
     Selective orthogonalization drops small terms from the relation, so the caller
     compares the two vectors' true residuals and keeps the better one.
     """
@@ -703,11 +696,10 @@ def _scaled_shifted(A, mdiag, d, sigma):
 
     Built on the CSR arrays of the Hermitian ``A``: scaled, shifted on the stored diagonal,
     and, conjugated, read as CSC arrays (those of :math:`K^H = K`), without SciPy's
-    sparse sum and CSR-to-CSC conversion (3 ms on Spot's :math:`L_c`).  The entries are
-    rounded as in ``((A - sigma M) D) D``, the shift before the scaling.  The low
-    eigenvalues come out of the cancellation of entries up to 1e5 times larger, so the
-    rounding of the diagonal shows: on Spot's :math:`L_c` (k = 24) the eigenvalues agree
-    with SciPy's shift-invert to 5e-15 this way, to 3e-14 with the shift after the scaling.
+    sparse sum and CSR-to-CSC conversion.  The entries are rounded as in
+    ``((A - sigma M) D) D``, the shift before the scaling: the low eigenvalues come out of
+    the cancellation of entries up to 1e5 times larger, so the rounding of the diagonal
+    shows in them.
     """
     A = sp.csr_matrix(A)
     n = A.shape[0]
