@@ -205,7 +205,11 @@ def _angle_defects(verts, topo, geom: FaceGeometry) -> torch.Tensor:
         return angle_defects(verts, topo)
     faces = topo.faces.to(geom.device)
     total = geom.lengths.new_zeros(topo.num_vertices).index_add(0, faces.flatten(), geom.angles.flatten())
-    full = torch.where(topo.boundary_vertices.to(geom.device), math.pi, 2 * math.pi).to(total.dtype)
+    full = torch.where(
+        topo.boundary_vertices.to(geom.device),
+        torch.full_like(total, math.pi),
+        torch.full_like(total, 2 * math.pi),
+    )
     defect = full - total
     if topo.unreferenced_vertices.numel():
         defect = defect.index_fill(0, topo.unreferenced_vertices.to(geom.device), 0.0)
