@@ -377,6 +377,7 @@ def cmd_info(args) -> int:
     """Every problem of the file at once (also those the loader rejects) and what repair would do."""
     import numpy as np
 
+    from .mesh.diagnose import operator_problems
     from .mesh.repair import repair
 
     verts, faces, report = _read_soup(args.mesh)
@@ -422,6 +423,7 @@ def cmd_info(args) -> int:
         if rep.unreferenced_vertices and not report.nonfinite_vertices:
             problems.append(f"{len(rep.unreferenced_vertices)} unreferenced vertices")
         topo = result.topology
+        problems += operator_problems(result.verts, topo)
         print(
             f"after repair: {topo.num_vertices} vertices, {topo.num_edges} edges, {topo.num_faces} faces, "
             f"{topo.num_components} components, Euler characteristic {topo.euler_characteristic}, "

@@ -128,9 +128,15 @@ class FaceGeometry:
         """
         if lengths.dim() != 2 or lengths.shape[1] != 3:
             raise ValueError(f"lengths must have shape (F, 3), got {tuple(lengths.shape)}")
-        sq = lengths * lengths
+        # computed on lengths divided by a power of two near the longest edge of each face
+        # (exact), then scaled back: the squares and the fourth power of Heron's formula
+        # neither overflow nor underflow at any scale (see _checked)
+        h = _power_of_two_scale(lengths.detach().amax(dim=1))
+        inv_h = 1 / h
+        ls = lengths * inv_h[:, None]
+        sq = ls * ls
         dots = 0.5 * (sq[:, [1, 2, 0]] + sq[:, [2, 0, 1]] - sq)
-        a, b, c = torch.sort(lengths, dim=1, descending=True).values.unbind(1)
+        a, b, c = torch.sort(ls, dim=1, descending=True).values.unbind(1)
         prod = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
         bad = torch.nonzero(prod.detach() <= 0).flatten().tolist()
         if bad:
@@ -138,19 +144,67 @@ class FaceGeometry:
                 f"edge lengths violate the strict triangle inequality (zero-area faces) "
                 f"at faces [{list_some(bad)}]"
             )
-        return _checked(cls(lengths, 0.5 * torch.sqrt(prod), dots))
+        return _checked(cls(ls, 0.5 * torch.sqrt(prod), dots), h)
 
 
-def _checked(geom: FaceGeometry) -> FaceGeometry:
-    """Reject faces whose area is zero relative to their longest edge."""
-    eps = torch.finfo(geom.double_area.dtype).eps
-    lt = geom.lengths.detach().t()
+def _power_of_two_scale(magnitude: torch.Tensor) -> torch.Tensor:
+    """Per face, the power of two ``2^k >= magnitude`` (1 where it is 0 or not finite).
+
+    Dividing and multiplying by it is exact, so quantities computed on coordinates or
+    lengths divided by it and scaled back agree bit for bit with the direct computation
+    wherever that neither overflowed nor underflowed.
+    """
+    m = magnitude.detach()
+    ok = torch.isfinite(m) & (m > 0)
+    _, k = torch.frexp(torch.where(ok, m, torch.ones_like(m)))
+    info = torch.finfo(m.dtype)
+    k = k.clamp(math.ceil(math.log2(info.tiny)) + 1, math.floor(math.log2(info.max)))
+    return torch.exp2(k.to(m.dtype))
+
+
+def _checked(scaled: FaceGeometry, h: torch.Tensor) -> FaceGeometry:
+    """Scale a geometry computed on lengths divided by ``h`` back; reject what cannot be used.
+
+    Faces whose area is zero relative to their longest edge are degenerate (tested on the
+    scaled quantities, so at any scale).  A well-shaped face whose area (a square of its
+    scale) is not a finite normal number of the dtype -- it overflows, or underflows to
+    zero or loses precision -- cannot be represented: a ``ValueError`` names the scale.
+    """
+    eps = torch.finfo(scaled.double_area.dtype).eps
+    lt = scaled.lengths.detach().t()
     lmax = torch.maximum(torch.maximum(lt[0], lt[1]), lt[2])
-    degenerate = geom.double_area.detach() <= 8 * eps * lmax * lmax
+    degenerate = scaled.double_area.detach() <= 8 * eps * lmax * lmax
     if degenerate.any():
         bad = torch.nonzero(degenerate).flatten().tolist()
         raise ValueError(f"zero-area (degenerate) faces at faces [{list_some(bad)}]")
+    h2 = h * h
+    geom = FaceGeometry(scaled.lengths * h[:, None], scaled.double_area * h2, scaled.dots * h2[:, None])
+    _check_representable(geom, lmax * h)
     return geom
+
+
+def _check_representable(geom: FaceGeometry, lmax: torch.Tensor) -> None:
+    info = torch.finfo(geom.double_area.dtype)
+    a2 = geom.double_area.detach()
+    sq = lmax * lmax
+    ok = (
+        torch.isfinite(a2)
+        & (a2 >= info.tiny)
+        & torch.isfinite(sq)
+        & torch.isfinite(geom.dots.detach()).all(1)
+    )
+    if bool(ok.all()):
+        return
+    bad = torch.nonzero(~ok).flatten()
+    big = bool((~torch.isfinite(sq[bad]) | ~torch.isfinite(a2[bad])).any())
+    scale = float(lmax[bad].max() if big else lmax[bad].min())
+    kind = "overflow" if big else "underflow"
+    raise ValueError(
+        f"edge lengths of about {scale:.3g} are out of the range of {geom.double_area.dtype}: "
+        f"face areas (squares of the lengths, {info.tiny:.3g} to {info.max:.3g}) {kind} at faces "
+        f"[{list_some(bad.tolist())}]; rescale the vertices (the connection Laplacian does not "
+        f"depend on the scale s, the mass matrix is proportional to s^2)"
+    )
 
 
 #: The last geometry computed without autograd for each topology, with the positions it
@@ -177,7 +231,12 @@ def face_geometry(verts, faces) -> FaceGeometry:
     Raises
     ------
     ValueError
-        On NaN/Inf coordinates or zero-area faces, naming them.
+        On NaN/Inf coordinates or zero-area faces, naming them, and where the areas (squares
+        of the edge lengths) are out of the range of the dtype, naming the scale.  Every
+        quantity is computed on the edge vectors of a face divided by a power of two of its
+        size (exact) and scaled back, so a well-shaped mesh gives finite operators at any
+        scale whose areas the dtype holds (float64: about 1e-150 to 1e150, float32: 1e-18 to
+        1e18).
     """
     topo = faces if isinstance(faces, Topology) else None
     faces = None if topo is not None else as_faces(faces)
@@ -205,6 +264,12 @@ def face_geometry(verts, faces) -> FaceGeometry:
     p = [[coords[x].index_select(0, ft[k]) for k in range(3)] for x in range(3)]  # p[x][corner]
     # e[x][k]: coordinate x of the edge opposite corner k, running from corner k+1 to k+2
     e = [[p[x][(k + 2) % 3] - p[x][(k + 1) % 3] for k in range(3)] for x in range(3)]
+    # Divided by a power of two near the largest coordinate difference of each face
+    # (exact) and scaled back by _checked: the products below (areas are squares of the
+    # scale, their squares fourth powers) neither overflow nor underflow at any scale.
+    h = _power_of_two_scale(torch.stack([c.detach().abs() for row in e for c in row]).amax(dim=0))
+    inv_h = 1 / h
+    e = [[c * inv_h for c in row] for row in e]
 
     def dot(a: int, b: int) -> torch.Tensor:
         return e[0][a] * e[0][b] + e[1][a] * e[1][b] + e[2][a] * e[2][b]
@@ -216,7 +281,7 @@ def face_geometry(verts, faces) -> FaceGeometry:
     double_area = torch.sqrt(cx * cx + cy * cy + cz * cz)
     # vectors leaving corner k: towards k+1 is -e_{k+2}, towards k+2 is e_{k+1}
     dots = -torch.stack([dot(2, 1), dot(0, 2), dot(1, 0)])
-    geom = _checked(FaceGeometry(lengths.t(), double_area, dots.t()))
+    geom = _checked(FaceGeometry(lengths.t(), double_area, dots.t()), h)
     if memo is not None:
         _LAST_GEOMETRY[memo] = (verts.detach().clone(), geom)
     return geom
@@ -262,7 +327,10 @@ def face_normals(verts, faces) -> torch.Tensor:
     verts = as_verts(verts)
     face_geometry(verts, faces)  # validates (zero-area faces have no normal)
     p = verts[faces.to(verts.device)]
-    n = torch.linalg.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    # divided by a power of two of each face's size first: the cross product is a square
+    inv_h = 1 / _power_of_two_scale(torch.maximum(a.detach().abs().amax(1), b.detach().abs().amax(1)))
+    n = torch.linalg.cross(a * inv_h[:, None], b * inv_h[:, None])
     return n / torch.linalg.vector_norm(n, dim=-1, keepdim=True)
 
 
