@@ -145,6 +145,15 @@ def _load(path):
     return default_mesh() if path is None else load_mesh(path)
 
 
+def _load_manifold(path):
+    """The mesh, refused (ValueError) before any work when its topology is unusable."""
+    from .mesh.topology import Topology
+
+    mesh = _load(path)
+    Topology(mesh.faces, num_vertices=mesh.verts.shape[0])  # raises on non-manifold edges
+    return mesh
+
+
 def _mesh_name(path) -> str:
     return BUILT_IN if path is None else str(path)
 
@@ -163,7 +172,7 @@ def cmd_demo(args) -> int:
     from .render import render_singularities
 
     step = _Progress(3 + bool(args.png), args.quiet)
-    mesh = _load(args.mesh)
+    mesh = _load_manifold(args.mesh)
     print(f"mesh: {_mesh_name(args.mesh)}, {mesh.verts.shape[0]} vertices, {mesh.faces.shape[0]} faces")
     if args.k >= mesh.verts.shape[0]:
         raise ValueError(f"-k {args.k}: must be smaller than the number of vertices ({mesh.verts.shape[0]})")
@@ -238,7 +247,7 @@ def cmd_design(args) -> int:
     from .render import render_singularities
 
     step = _Progress(2 + bool(args.png), args.quiet)
-    mesh = _load(args.mesh)
+    mesh = _load_manifold(args.mesh)
     step(
         f"designing the {'curvature-aligned' if args.align == 'curvature' else 'smoothest'} "
         f"{args.n}-direction field on {_mesh_name(args.mesh)}"
@@ -281,7 +290,7 @@ def cmd_singularities(args) -> int:
         if z.dim() != 1:
             raise ValueError(f"{args.field}: expected one field (E,), got {tuple(z.shape)}")
     else:
-        mesh = _load(args.mesh)
+        mesh = _load_manifold(args.mesh)
         step(f"designing the smoothest {args.n}-direction field on {_mesh_name(args.mesh)}")
         verts, faces, n = mesh.verts, mesh.faces, args.n
         z = _design(mesh, n, "none")
@@ -314,7 +323,7 @@ def cmd_param(args) -> int:
     from .render import render_parametrization
 
     step = _Progress(2 + bool(args.png), args.quiet)
-    mesh = _load(args.mesh)
+    mesh = _load_manifold(args.mesh)
     step(f"designing the {'curvature-aligned' if args.align == 'curvature' else 'smoothest'} cross field")
     z = _design(mesh, 4, args.align)
     step("solving for the seamless (u, v) parametrization")

@@ -50,6 +50,7 @@ import scipy.sparse.csgraph as csg
 import scipy.sparse.linalg as sla
 import torch
 
+from .._dtypes import complex_dtype as complex_dtype_of
 from .._validation import as_edge_field
 from ..mesh.geometry import mean_edge_length, topology_and_verts
 from ..mesh.topology import Topology
@@ -325,10 +326,11 @@ class Parametrization:
     Attributes
     ----------
     verts, faces : the mesh the parametrization lives on (after splitting singular faces)
-    uv : (F, 3, 2) float64 tensor, per-corner ``(u, v)``
+    uv : (F, 3, 2) tensor, per-corner ``(u, v)``; solved in float64, returned (like
+        ``verts``, ``z`` and ``translations``) in the dtype of the input vertices
     z : (E,) cross field on that mesh
     cut_edges : (E,) bool tensor; matching : (E,) int64 (``k_e``, see :class:`Combing`)
-    translations : (K, 2) float64, ``t_e`` for the cut edges (in the order of
+    translations : (K, 2), ``t_e`` for the cut edges (in the order of
         ``cut_edges.nonzero()``): ``w_g = i^{-k} w_f + t`` at both ends of the edge
     singular_vertices : (S,) int64
     flipped : int, number of faces with negative signed ``uv`` area
@@ -417,6 +419,8 @@ def parametrize(
     z = as_edge_field(z, topo, verts)
     if z.dim() != 1:
         raise ValueError(f"z must have shape (E,), got {tuple(z.shape)}")
+    # solved in float64; the result comes back in the input's precision and on its device
+    real_dtype, device = verts.dtype, verts.device
     verts = verts.detach().to(torch.float64)
     z = z.detach().to(torch.complex128)
     if split:
@@ -533,14 +537,15 @@ def parametrize(
     energy = float(np.sum((A_ls @ x - rhs) ** 2) * area.sum())
     flips = flipped_faces(torch.from_numpy(uv))
     dev = topo.faces.device
+    complex_dtype = complex_dtype_of(real_dtype)
     return Parametrization(
-        verts=verts,
+        verts=verts.to(device=device, dtype=real_dtype),
         faces=topo.faces,
-        uv=torch.from_numpy(uv),
-        z=z,
+        uv=torch.from_numpy(uv).to(device=device, dtype=real_dtype),
+        z=z.to(device=device, dtype=complex_dtype),
         cut_edges=torch.from_numpy(cut).to(dev),
         matching=torch.from_numpy(cmb.matching),
-        translations=torch.from_numpy(t_final),
+        translations=torch.from_numpy(t_final).to(device=device, dtype=real_dtype),
         singular_vertices=sing.singular_vertices,
         flipped=int(flips.sum()),
         energy=energy,

@@ -185,7 +185,9 @@ class _SuperLUFactor(_Factor):
         if not np.array_equal(self._lu.perm_r, self._lu.perm_c):
             return False
         d = self._lu.U.diagonal()
-        return bool(np.all(d.real > 0) and np.all(np.abs(d.imag) <= 1e-8 * np.abs(d.real)))
+        # Hermitian pivots are real up to rounding, which is relative to the precision
+        tol = max(1e-8, 64 * float(np.finfo(d.real.dtype).eps))
+        return bool(np.all(d.real > 0) and np.all(np.abs(d.imag) <= tol * np.abs(d.real)))
 
     def _solve(self, b, adjoint):
         trans = "N" if not adjoint or self.hermitian else ("H" if np.iscomplexobj(b) else "T")
