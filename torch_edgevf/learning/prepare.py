@@ -87,7 +87,8 @@ def prepare_psb(src_dir, out, faces: int = 2000, show_progress: bool | None = No
     ValueError
         No OFF file of the benchmark's classes in ``src_dir``, or ``faces < 4``.
     """
-    from ..io import load_mesh
+    import trimesh
+
     from ..mesh.topology import Topology
     from .progress import progress
 
@@ -101,8 +102,10 @@ def prepare_psb(src_dir, out, faces: int = 2000, show_progress: bool | None = No
         raise ValueError(f"{src}: no benchmark OFF files (off/1.off ... off/400.off)")
     verts, tris, labels, ids, eulers, skipped = [], [], [], [], [], []
     for psb_id, path in progress(list(files.items()), desc="PSB meshes", enabled=show_progress):
-        mesh = load_mesh(path)
-        v, f = _decimate(mesh.verts.numpy(), mesh.faces.numpy(), faces)
+        # trimesh reads the file (torch_edgevf.io sits above this layer); process=True
+        # merges duplicated vertices and drops degenerate faces
+        mesh = trimesh.load(path, file_type="off", force="mesh", process=True)
+        v, f = _decimate(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), faces)
         try:
             topo = Topology(f, num_vertices=len(v))
             topo.require_closed()
