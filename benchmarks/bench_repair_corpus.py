@@ -119,11 +119,7 @@ def main() -> None:
             "",
             f"PSB: {n_psb} meshes, {psb_ok} end to end; {len(psb_rows)} needed a repair: "
             + _counts(psb_needs)
-            + (
-                " (psb ids " + ", ".join(f"{i}: {', '.join(d)}" for i, d in psb_rows) + ")."
-                if psb_rows
-                else "."
-            ),
+            + (" (psb ids " + ", ".join(str(i) for i, _ in psb_rows) + ")." if psb_rows else "."),
         ]
     OUT.write_text("\n".join(lines) + "\n")
     print(f"wrote {OUT}")
