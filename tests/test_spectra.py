@@ -20,7 +20,8 @@ def _scipy(a: torch.Tensor) -> sp.csc_matrix:
 
 
 def _smallest(A, M, k):
-    vals = spla.eigsh(_scipy(A), k=k, M=_scipy(M), sigma=-1e-3, which="LM", return_eigenvectors=False)
+    v0 = np.random.default_rng(0).standard_normal(A.shape[0])  # ARPACK's own start is random
+    vals = spla.eigsh(_scipy(A), k=k, M=_scipy(M), sigma=-1e-3, which="LM", v0=v0, return_eigenvectors=False)
     return np.sort(vals.real)
 
 
