@@ -160,8 +160,7 @@ ALLOWED = {
     "linalg": FOUNDATION,
     "operators": FOUNDATION | {"mesh", "linalg"},
     "fields": FOUNDATION | {"mesh", "linalg", "operators"},
-    # io imports nothing of the package: the dataset preparation reads mesh files with it
-    "learning": FOUNDATION | {"mesh", "linalg", "operators", "fields", "io"},
+    "learning": FOUNDATION | {"mesh", "linalg", "operators", "fields"},
 }
 
 
