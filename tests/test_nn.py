@@ -130,6 +130,20 @@ def test_learned_diffusion_module_wraps_functions(mesh):
     torch.testing.assert_close(abs_layer.times, torch.full((2,), 0.1))
 
 
+def test_clamped_times_start_at_zero_and_pass_the_gradient():
+    layer = enn.LearnedDiffusion(3, positivity="clamp")
+    torch.testing.assert_close(layer.times, torch.full((3,), enn.MIN_TIME))  # initial raw time 0
+    layer.times.sum().backward()  # straight through: the clamp does not stop the gradient
+    torch.testing.assert_close(layer.raw_times.grad, torch.ones(3))
+    with torch.no_grad():
+        layer.raw_times.copy_(torch.tensor([-1.0, 0.0, 0.5]))
+    torch.testing.assert_close(layer.times.detach(), torch.tensor([enn.MIN_TIME, enn.MIN_TIME, 0.5]))
+    with pytest.raises(ValueError, match="positive"):
+        enn.LearnedDiffusion(2, init_times=0.0)  # zero only with the clamp
+    with pytest.raises(ValueError, match="mode"):
+        enn.positive_time(torch.zeros(1), "relu")
+
+
 # --------------------------------------------------------------------------- gradient features
 
 
@@ -266,8 +280,6 @@ def test_errors(mesh):
         enn.complex_linear(z.real, torch.ones(2, 2, dtype=torch.complex128))
     with pytest.raises(ValueError, match="weight"):
         enn.complex_linear(z, torch.ones(3, 2, dtype=torch.complex128))
-    with pytest.raises(ValueError, match="real vertex scalars"):
-        enn.gradient_features(z[:42], ev.gradient(mesh["v"], mesh["topo"]), mesh["m"])
     with pytest.raises(ValueError, match="sparse"):
         enn.gradient_features(torch.ones(42, 1, dtype=torch.float64), torch.ones(ne, 42), mesh["m"])
     with pytest.raises(ValueError, match="bias"):
@@ -310,7 +322,7 @@ def moved_pair():
 def test_networks_invariant_to_rigid_motion_and_renumbering(moved_pair, model, head):
     s1, s2, inv, fperm = moved_pair
     torch.manual_seed(0)
-    net = model(8, 5, width=8, num_blocks=2, head=head).double()
+    net = model(8, 5, width=8, num_blocks=2, head=head).double().eval()  # no dropout
     y1 = net(data.MeshBatch.from_operators(s1.operators, s1.features))
     y2 = net(data.MeshBatch.from_operators(s2.operators, s2.features))
     if head == "vertex":
@@ -343,7 +355,7 @@ def test_networks_batch_equals_single_and_float32(moved_pair):
     s1, s2, _, _ = moved_pair
     torch.manual_seed(0)
     for model in (models.EdgeFieldNet, models.DiffusionNetBaseline):
-        net = model(8, 3, width=8, num_blocks=1).double()
+        net = model(8, 3, width=8, num_blocks=1).double().eval()
         both = net(data.collate_meshes([s1, s2]))
         single = torch.cat([net(data.collate_meshes([s])) for s in (s1, s2)])
         torch.testing.assert_close(both, single)
@@ -358,12 +370,27 @@ def test_networks_batch_equals_single_and_float32(moved_pair):
         assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in net32.parameters())
 
 
-def test_edge_network_implicit_diffusion(moved_pair):
+def test_edge_diffusion_block_implicit_diffusion(moved_pair):
     s1, _, _, _ = moved_pair
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, 2, width=4, num_blocks=1, diffusion="implicit").double()
-    out = net(data.MeshBatch.from_operators(s1.operators, s1.features))
-    assert out.shape == (1, 2) and torch.isfinite(out).all()
+    batch = data.MeshBatch.from_operators(s1.operators, s1.features)
+    block = models.EdgeDiffusionBlock(4, diffusion="implicit").double()
+    z = enn.gradient_features(s1.features[:, :4], batch.gradient, batch.edge_mass)
+    out = block(z, batch)
+    assert out.shape == z.shape and torch.isfinite(out).all()
+
+
+def test_gradient_features_of_complex_scalars_are_gradient_plus_rotated_gradient(mesh):
+    G = ev.gradient(mesh["v"], mesh["topo"])
+    g = torch.Generator().manual_seed(2)
+    a, b = (torch.randn(mesh["v"].shape[0], 2, generator=g, dtype=torch.float64) for _ in range(2))
+    both = enn.gradient_features(torch.complex(a, b), G, mesh["m"])
+    expected = enn.gradient_features(a, G, mesh["m"]) + 1j * enn.gradient_features(b, G, mesh["m"])
+    torch.testing.assert_close(both, expected)
+    # without the mass: G f itself
+    torch.testing.assert_close(
+        enn.gradient_features(a, G), both.real.new_tensor(0) + G.to_dense() @ a.to(G.dtype)
+    )
 
 
 def test_network_errors(moved_pair):

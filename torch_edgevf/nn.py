@@ -1,6 +1,7 @@
 """The layers of :mod:`torch_edgevf.learning.layers`, under the name ``torch_edgevf.nn``."""
 
 from .learning.layers import (
+    MIN_TIME,
     ComplexLinear,
     DivergenceFeatures,
     EdgePooling,
@@ -36,6 +37,7 @@ __all__ = [
     "pool_global",
     "normalize_modulus",
     "positive_time",
+    "MIN_TIME",
     "LearnedDiffusion",
     "GradientFeatures",
     "DivergenceFeatures",

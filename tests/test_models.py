@@ -1,0 +1,169 @@
+"""The reference networks: EdgeFieldNet and DiffusionNet.
+
+Invariance of the outputs to rigid motions and to vertex renumbering, gradcheck of the
+new block in float64, dtype agreement at the first call, and learning: accuracy well
+above chance on generated shapes (and on a few PSB classes, slow lane).
+"""
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from torch_edgevf.learning import batching, models, precompute
+
+from conftest import perturbed_icosphere, psb_file
+
+OPTIONS = dict(k_edge=16, k_vertex=16, vertex_gradient=True)
+
+
+def _batch(v, f, label=0, dtype=torch.float64):
+    ops = precompute.compute_operators(v, f, **OPTIONS)
+    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8)
+    return batching.MeshBatch.from_operators(ops.to(dtype), x.to(dtype), label)
+
+
+def _rotation(seed=0):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    v, f = perturbed_icosphere(2, 0.08, seed=3)
+    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+
+
+NETWORKS = {
+    "edge": lambda: models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,)),
+    "edge-vertex": lambda: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), vector="vertex"
+    ),
+    "diffusionnet": lambda: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(NETWORKS))
+@pytest.mark.parametrize("head", ["global", "vertex", "face"])
+def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head):
+    v, f = mesh
+    torch.manual_seed(0)
+    net = NETWORKS[name]().double().eval()
+    net.head = head
+    perm = np.random.default_rng(1).permutation(v.shape[0])
+    inverse = np.argsort(perm)
+    v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
+    f2 = inverse[f][:, [1, 2, 0]]  # renumbered vertices, rotated corners
+    with torch.no_grad():
+        a, b = net(_batch(v, f)), net(_batch(v2, f2))
+    if head == "vertex":
+        b = b[inverse]
+    assert a.abs().max() > 1e-3  # not a trivial output
+    torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)
+
+
+def test_edge_field_block_gradcheck(mesh):
+    v, f = perturbed_icosphere(1, 0.08, seed=4)
+    batch = _batch(v, f)
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0).double()
+    with torch.no_grad():  # nonzero times, so that the diffusion is exercised
+        block.diffusion.raw_times.fill_(0.05)
+        block.field_diffusion.raw_times.fill_(0.05)
+    x = torch.randn(batch.num_vertices, 3, dtype=torch.float64, requires_grad=True)
+    z = torch.randn(batch.num_edges, 2, dtype=torch.complex128, requires_grad=True)
+
+    def f_(x, z, t, s):
+        block.diffusion.raw_times, block.field_diffusion.raw_times = t, s
+        y, w = block(x, z, batch)
+        return y, torch.view_as_real(w)
+
+    t = block.diffusion.raw_times.detach().clone().requires_grad_(True)
+    s = block.field_diffusion.raw_times.detach().clone().requires_grad_(True)
+    del block.diffusion.raw_times, block.field_diffusion.raw_times
+    assert torch.autograd.gradcheck(f_, (x, z, t, s))
+
+
+def test_dtype_mismatch_is_named_at_the_first_call(mesh):
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1)
+    with pytest.raises(ValueError, match="float64.*float32|float32.*float64"):
+        net(_batch(*mesh, dtype=torch.float64))
+
+
+def test_missing_operators_are_named(mesh):
+    b = _batch(*mesh)
+    b.vertex_gradient = None
+    with pytest.raises(ValueError, match="vertex_gradient"):
+        models.DiffusionNet(8, 5, width=8, num_blocks=1).double()(b)
+
+
+# --------------------------------------------------------------------------- learning
+
+
+def _shape(kind: str, rng) -> trimesh.Trimesh:
+    a = rng.uniform(0.7, 1.3, size=3)
+    if kind == "ellipsoid":
+        m = trimesh.creation.icosphere(subdivisions=2)
+    elif kind == "torus":
+        m = trimesh.creation.torus(
+            major_radius=1.0, minor_radius=rng.uniform(0.3, 0.5), major_sections=24, minor_sections=12
+        )
+    elif kind == "capsule":
+        m = trimesh.creation.capsule(height=rng.uniform(1.5, 2.5), radius=0.5, count=[16, 16])
+    else:
+        m = trimesh.creation.box(extents=a)
+        m = m.subdivide().subdivide().subdivide()
+    m.vertices = m.vertices * a
+    m.vertices += rng.normal(scale=0.01, size=m.vertices.shape)
+    return m
+
+
+def _accuracy(net, batches):
+    net.eval()
+    with torch.no_grad():
+        acc = np.mean([int(net(b).argmax(-1)) == int(b.labels) for b in batches])
+    net.train()
+    return acc
+
+
+def _train(net, train, epochs, seed=0):
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    g = torch.Generator().manual_seed(seed)
+    for _ in range(epochs):
+        for i in torch.randperm(len(train), generator=g).tolist():
+            opt.zero_grad()
+            torch.nn.functional.cross_entropy(net(train[i]), train[i].labels).backward()
+            opt.step()
+
+
+def test_edge_field_net_learns_generated_shapes():
+    kinds = ["ellipsoid", "torus", "capsule", "box"]
+    rng = np.random.default_rng(0)
+    data = []
+    for label, kind in enumerate(kinds):
+        for _ in range(8):
+            m = _shape(kind, rng)
+            data.append(_batch(m.vertices, m.faces, label, dtype=torch.float32))
+    test = data[6::8] + data[7::8]
+    train = [b for i, b in enumerate(data) if i % 8 < 6]
+    torch.manual_seed(0)
+    net = models.EdgeFieldNet(8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,))
+    _train(net, train, epochs=15)
+    assert _accuracy(net, test) >= 0.75  # chance: 0.25
+    assert _accuracy(net, train) >= 0.75
+
+
+@pytest.mark.slow
+def test_edge_field_net_learns_psb_classes():
+    d = np.load(psb_file())
+    classes = [0, 3, 7, 12]  # human, airplane, table, bird
+    train, test = [], []
+    for label, c in enumerate(classes):
+        for i in np.flatnonzero(d["labels"] == c):
+            v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]].astype(np.float64)
+            f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
+            (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
+    torch.manual_seed(0)
+    net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,))
+    _train(net, train, epochs=10)
+    assert _accuracy(net, test) >= 0.6  # chance: 0.25
