@@ -382,11 +382,35 @@ def _read_soup(path):
     return read_triangles(path, merge=True)
 
 
+def _operator_problems(verts, topo) -> list[str]:
+    """NaN or Inf in the connection Laplacian or mass matrix (never raises).
+
+    The geometry already refuses scales whose areas the dtype cannot hold; this also
+    assembles ``L_c`` and ``M_z``, so that a mesh is never reported sound while its
+    operators are not finite.
+    """
+    import torch
+
+    from .operators.functional import connection_laplacian, mass_matrix
+
+    try:
+        values = {
+            "connection Laplacian": connection_laplacian(verts, topo, 1).coalesce().values(),
+            "mass matrix": mass_matrix(verts, topo).coalesce().values(),
+        }
+    except ValueError as exc:
+        return [str(exc)]
+    return [
+        f"the {name} has {int((~torch.isfinite(v)).sum())} NaN or Inf values"
+        for name, v in values.items()
+        if not bool(torch.isfinite(v).all())
+    ]
+
+
 def cmd_info(args) -> int:
     """Every problem of the file at once (also those the loader rejects) and what repair would do."""
     import numpy as np
 
-    from .mesh.diagnose import operator_problems
     from .mesh.repair import repair
 
     verts, faces, report = _read_soup(args.mesh)
@@ -432,7 +456,7 @@ def cmd_info(args) -> int:
         if rep.unreferenced_vertices and not report.nonfinite_vertices:
             problems.append(f"{len(rep.unreferenced_vertices)} unreferenced vertices")
         topo = result.topology
-        problems += operator_problems(result.verts, topo)
+        problems += _operator_problems(result.verts, topo)
         print(
             f"after repair: {topo.num_vertices} vertices, {topo.num_edges} edges, {topo.num_faces} faces, "
             f"{topo.num_components} components, Euler characteristic {topo.euler_characteristic}, "

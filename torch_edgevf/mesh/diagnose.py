@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import torch
-
 from .._validation import as_faces, as_verts
 from .geometry import face_geometry
 from .topology import Topology
@@ -56,30 +54,4 @@ def diagnose(verts, faces) -> Diagnosis:
             face_geometry(verts, faces)
         except ValueError as exc:
             out.problems.append(str(exc))
-        else:
-            out.problems += operator_problems(verts, faces)
     return out
-
-
-def operator_problems(verts, faces) -> list[str]:
-    """Problems of the connection Laplacian and mass matrix of a mesh (never raises).
-
-    The geometry is checked for what the dtype can represent (see
-    :func:`~torch_edgevf.mesh.geometry.face_geometry`); this also assembles ``L_c`` and
-    ``M_z`` and reports NaN or Inf values, so that a mesh is never reported sound while
-    its operators are not finite.
-    """
-    from ..operators.functional import connection_laplacian, mass_matrix
-
-    try:
-        values = {
-            "connection Laplacian": connection_laplacian(verts, faces, 1).coalesce().values(),
-            "mass matrix": mass_matrix(verts, faces).coalesce().values(),
-        }
-    except ValueError as exc:
-        return [str(exc)]
-    return [
-        f"the {name} has {int((~torch.isfinite(v)).sum())} NaN or Inf values"
-        for name, v in values.items()
-        if not bool(torch.isfinite(v).all())
-    ]

@@ -252,30 +252,34 @@ def vertex_mass(verts, topo, lumped: bool = False) -> torch.Tensor:
     return vertex_mass_from(geom, topo, lumped)
 
 
-def covariant_derivative(verts, topo, w) -> torch.Tensor:
+def covariant_derivative(verts, topo, w, n: int = 1) -> torch.Tensor:
     """The covariant derivative ``D_w`` along the edge field ``w`` (thesis 5.1, A.5).
 
     ``M_z x = D_w z`` gives the edge field ``x`` of ``nabla_w psi``; per face,
 
     .. math::  (D_w)_{ab} \\mathrel{+}= -\\delta_b \\frac{|e_b|}{3}
-               \\operatorname{Im}(w_a r_{ab})\\, r_{ba}
+               \\operatorname{Im}(w_a r_{ab})\\, r_{ba}^n
 
     including ``a = b`` (``r_aa = 1``), whose contributions cancel on interior edges and
-    leave the boundary diagonal. Real-linear (not complex-linear) in ``w``.
+    leave the boundary diagonal. Real-linear (not complex-linear) in ``w``.  For ``n > 1``
+    it acts on the representation vectors of ``n``-direction fields (frames ``u^n``, as
+    in the connection Laplacian ``L_c^(n)``); ``w`` is always a vector field.
 
     Parameters
     ----------
     w : (E,) complex tensor (a real tensor is taken as having zero imaginary part)
+    n : int >= 1, the symmetry of the fields the operator acts on
 
     Returns
     -------
     (E, E) complex sparse tensor.
     """
+    n = check_n(n)
     verts, topo, geom, signs = prepare(verts, topo)
     w = as_edge_field(w, topo, verts, name="w")
     if w.dim() != 1:
         raise ValueError(f"w must have shape (E,), got {tuple(w.shape)}")
-    return covariant_from(geom, signs, topo, w)
+    return covariant_from(geom, signs, topo, w, n)
 
 
 def cotan_laplacian(verts, topo) -> torch.Tensor:

@@ -209,10 +209,13 @@ def gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
     return torch.stack(values).reshape(-1)
 
 
-def covariant_values(geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor) -> torch.Tensor:
+def covariant_values(
+    geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor, n: int = 1
+) -> torch.Tensor:
     r = pair_transport(geom, signs, 1)
+    rn = r if n == 1 else pair_transport(geom, signs, n)
     scale = -pair_columns(signs * geom.lengths, "b") / 3
-    return (scale * (w_pairs * r).imag * r.conj()).flatten()
+    return (scale * (w_pairs * r).imag * rn.conj()).flatten()
 
 
 def curl_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
@@ -255,6 +258,6 @@ def vertex_mass_from(geom: FaceGeometry, topo: Topology, lumped: bool) -> torch.
     return cached_pattern(topo, "VV").assemble(vals.flatten())
 
 
-def covariant_from(geom, signs, topo, w) -> torch.Tensor:
+def covariant_from(geom, signs, topo, w, n: int = 1) -> torch.Tensor:
     w_pairs = w[pair_columns(topo.face_edges.to(w.device), "a")]
-    return cached_pattern(topo, "EE").assemble_pairs(covariant_values(geom, signs, w_pairs))
+    return cached_pattern(topo, "EE").assemble_pairs(covariant_values(geom, signs, w_pairs, n))
