@@ -95,7 +95,7 @@ def test_growth_warns_with_a_suggested_smoothing():
     v, topo, p, w = killing_sphere(3)
     z0 = nth_power(w, 4)
     with pytest.warns(
-        TransportGrowthWarning, match=r"M_z-norm of the field grew by .*pass smoothing=0.00091 with steps=9"
+        TransportGrowthWarning, match=r"M_z-norm of the field grew by .*pass smoothing=0.00025 with steps=9"
     ):
         transport(v, topo, z0, w, 2 * math.pi, n=4)  # one full turn: the norm grows about 3x
     with warnings.catch_warnings():

@@ -59,14 +59,16 @@ __all__ = ["Transporter", "TransportGrowthWarning", "transport", "SUGGESTED_SMOO
 
 DIRECTIONS = ("backward", "forward")
 
-#: The smoothing suggested when the norm grows, ``(c, k)``: ``smoothing = c h^2`` (``h``
-#: the mean edge length, so that the suggestion follows the scale of the mesh) with at least
-#: ``k |t|`` steps.  Along the unit sphere's rotation field, one full turn (``t = 2 pi``) of
-#: a vector field with ``0.04 h^2`` and 8 steps: relative L2 error 0.20 / 0.075 at
-#: icosphere levels 3 / 4 (0.45 / 0.92 without smoothing), norm 0.88 / 0.94 of the
-#: initial one (1.02 / 1.33 without).  The heat step damps n-direction fields (``n >= 2``)
-#: more; see ``tests/test_transport_n.py``.
-SUGGESTED_SMOOTHING = (0.04, 1.3)
+#: The smoothing suggested when the norm grows, ``(c, k)``: ``smoothing = c A`` (``A`` the
+#: area of the mesh, so that the suggestion follows its scale) with at least ``k |t|``
+#: steps.  Along the unit sphere's rotation field, one full turn (``t = 2 pi``) of a vector
+#: field with ``smoothing = 2.3e-4`` and 8 steps: relative L2 error 0.20 / 0.075 / 0.045
+#: at icosphere levels 3 / 4 / 5 (0.45 / 0.92 / 51 without smoothing), ``M_z``-norm 0.88 /
+#: 0.94 / 0.97 of the initial one (1.02 / 1.33 / 51 without).  A smoothing proportional to
+#: the squared edge length is too weak on fine meshes (level 5 with ``5.7e-5``: error 2.6):
+#: the growth rates of the unstable modes increase with the resolution.  The heat step
+#: damps n-direction fields (``n >= 2``) more; see ``tests/test_transport_n.py``.
+SUGGESTED_SMOOTHING = (2e-5, 1.3)
 
 
 class TransportGrowthWarning(RuntimeWarning):
@@ -195,9 +197,7 @@ class Transporter:
 
     def _warn_growth(self, growth: float, t: float, steps: int) -> None:
         c, per_unit = SUGGESTED_SMOOTHING
-        from ..mesh.geometry import mean_edge_length
-
-        s = c * float(mean_edge_length(self.verts.detach(), self.topo)) ** 2
+        s = c * float(self.mass.detach().sum())  # the area of the mesh
         suggested_steps = max(steps, math.ceil(per_unit * abs(t)))
         advice = (
             f"pass smoothing={s:.2g} with steps={suggested_steps} (an implicit heat step after each)"
