@@ -167,3 +167,36 @@ def test_edge_field_net_learns_psb_classes():
     net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,))
     _train(net, train, epochs=10)
     assert _accuracy(net, test) >= 0.6  # chance: 0.25
+
+
+# --------------------------------------------------------------------------- one dtype
+
+
+def test_compute_operators_in_the_dtype_asked_for(mesh):
+    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, dtype=torch.float32)
+    assert ops.edge_mass.dtype == torch.float32 and ops.verts.dtype == torch.float32
+    assert ops.gradient.dtype == torch.complex64 and ops.edge_evecs.dtype == torch.complex64
+    with pytest.raises(ValueError, match="dtype"):
+        precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, dtype=torch.float16)
+
+
+def test_collate_names_a_features_and_operators_mismatch(mesh):
+    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4)
+    x = torch.ones(ops.num_vertices, 3, dtype=torch.float32)
+    with pytest.raises(ValueError, match="float32 features but torch.float64 operators"):
+        batching.collate_meshes([batching.MeshSample(ops, x, 0)])
+
+
+@pytest.mark.filterwarnings("error")
+def test_data_loader_workers_print_no_torch_warning(mesh):
+    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, vertex_gradient=True, dtype=torch.float32)
+    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=3)
+    items = [batching.MeshSample(ops, x, i % 2, index=i) for i in range(4)]
+    loader = torch.utils.data.DataLoader(
+        items, batch_size=2, collate_fn=batching.collate_meshes, num_workers=1
+    )
+    batches = list(loader)  # a warning raised while unpickling in this process fails the test
+    assert [int(b.num_meshes) for b in batches] == [2, 2]
+    assert batches[0].gradient.layout == torch.sparse_coo and batches[0].gradient.is_coalesced()
+    single = batching.collate_meshes(items[:2])
+    torch.testing.assert_close(batches[0].gradient.to_dense(), single.gradient.to_dense())

@@ -108,6 +108,11 @@ def collate_meshes(samples: Sequence[MeshSample]) -> MeshBatch:
             raise ValueError("all meshes of a batch need the same n and dtype")
         if (o.vertex_gradient is None) != (first.vertex_gradient is None):
             raise ValueError("either all or no meshes of a batch have a vertex_gradient")
+        if s.features.dtype != o.verts.dtype:
+            raise ValueError(
+                f"sample {s.index} has {s.features.dtype} features but {o.verts.dtype} operators: "
+                f"convert one of them (features.to({o.verts.dtype}) or operators.to({s.features.dtype}))"
+            )
         if s.features.dim() != 2 or s.features.shape[0] != o.num_vertices:
             raise ValueError(
                 f"features must have shape (V, C) with V = {o.num_vertices}, got {tuple(s.features.shape)}"

@@ -31,6 +31,9 @@ __all__ = [
 ]
 
 
+_SPARSE = "sparse_coo"
+
+
 @dataclass
 class MeshFields:
     """The tensors of one mesh, or of a batch of meshes as one disconnected mesh.
@@ -81,6 +84,27 @@ class MeshFields:
     @property
     def num_faces(self) -> int:
         return int(self.faces.shape[0])
+
+    def __getstate__(self) -> dict:
+        # Sparse tensors travel as (indices, values, shape) and are rebuilt without the
+        # invariant checks (they were checked when built): torch's own reduction of a
+        # sparse tensor, used between DataLoader workers and the main process, rebuilds
+        # it with the checks implicitly off and warns about it.
+        state = dict(self.__dict__)
+        for name, value in state.items():
+            if isinstance(value, torch.Tensor) and value.layout == torch.sparse_coo:
+                value = value.coalesce()
+                state[name] = (_SPARSE, value.indices(), value.values(), tuple(value.shape))
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        for name, value in state.items():
+            if isinstance(value, tuple) and len(value) == 4 and value[0] == _SPARSE:
+                _, indices, values, shape = value
+                state[name] = torch.sparse_coo_tensor(
+                    indices, values, shape, is_coalesced=True, check_invariants=False
+                )
+        self.__dict__.update(state)
 
 
 @dataclass
@@ -197,8 +221,9 @@ def compute_operators(
     vertex_laplacian: str = "cotan",
     vertex_gradient: bool = False,
     tol: float | None = None,
+    dtype: torch.dtype = torch.float64,
 ) -> MeshOperators:
-    """Compute the :class:`MeshOperators` of a mesh, in float64.
+    """Compute the :class:`MeshOperators` of a mesh (in float64, then returned in ``dtype``).
 
     Parameters
     ----------
@@ -215,7 +240,13 @@ def compute_operators(
     tol : float, optional
         Tolerance of the eigenpairs, ``tol`` of :func:`torch_edgevf.linalg.eigsh`
         (default: its default, ``1e-13`` in float64).
+    dtype : torch.float64 or torch.float32
+        Dtype of the real tensors returned (complex ones in the matching complex dtype);
+        everything is computed in float64 first. Use ``torch.float32`` for networks in
+        single precision (the models check that batch and parameters agree).
     """
+    if dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"dtype must be torch.float32 or torch.float64, got {dtype!r}")
     if vertex_laplacian not in ("cotan", "edge"):
         raise ValueError(f"vertex_laplacian must be 'cotan' or 'edge', got {vertex_laplacian!r}")
     if not isinstance(n, int) or isinstance(n, bool) or n < 1:
@@ -256,7 +287,7 @@ def compute_operators(
         vertex_gradient=vertex_gradient_operator(verts, topo) if vertex_gradient else None,
         n=n,
     )
-    return out
+    return out if dtype == torch.float64 else out.to(dtype)
 
 
 def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) -> torch.Tensor:
