@@ -241,10 +241,6 @@ def main(argv=None) -> list[dict]:
         results = [r for f in a.table for r in json.loads(Path(f).read_text())]
         print(table(results, list(dict.fromkeys(r["model"] for r in results))))
         return results
-    try:
-        a.data = str(psb_path(a.data))
-    except ValueError as e:
-        p.error(str(e))
     names = [m for m in a.models.split(",") if m]
     unknown = sorted(set(names) - set(MODELS))
     if unknown:
@@ -253,6 +249,10 @@ def main(argv=None) -> list[dict]:
         p.error("--folds must be 0 (off) or at least 2")
     if a.folds and a.split:
         p.error("--folds and --split exclude each other")
+    try:
+        a.data = str(psb_path(a.data))
+    except ValueError as e:
+        p.error(str(e))
     torch.set_num_threads(a.threads)
 
     dataset = load_psb(a.data)

@@ -1,0 +1,66 @@
+"""benchmarks/bench_learning.py: its quick run, its splits and its argument errors."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_learning.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench_learning", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
+    out = tmp_path / "runs.json"
+    results = bench.main(
+        ["--quick", "--cache", str(tmp_path / "cache"), "--threads", "1", "--json", str(out)]
+    )
+    saved = json.loads(out.read_text())
+    assert [r["model"] for r in saved] == ["edgefieldnet", "diffusionnet"] == [r["model"] for r in results]
+    for r in saved:
+        assert set(r) >= {"test_accuracy", "train_accuracy", "train_seconds", "parameters", "seed", "split"}
+        assert 0 <= r["test_accuracy"] <= 1 and r["train_seconds"] > 0 and r["parameters"] > 10_000
+    printed = capsys.readouterr().out
+    assert "| edgefieldnet |" in printed and "| diffusionnet |" in printed
+    assert bench.main(["--table", str(out)]) == saved
+
+
+def test_folds_are_stratified_and_cover_every_mesh_once(bench):
+    labels = np.repeat(np.arange(5), 20)
+    dataset = {"labels": labels, "split": np.zeros(100, dtype=int)}
+    masks = [m for _, m in bench.splits(dataset, 5, None)]
+    assert (np.sum(masks, axis=0) == 1).all()
+    for m in masks:
+        assert (np.bincount(labels[m], minlength=5) == 4).all()
+    assert len(bench.splits(dataset, 0, None)) == 1
+
+
+def test_split_file_is_checked(bench, tmp_path):
+    dataset = {"labels": np.zeros(10, dtype=int), "split": np.zeros(10, dtype=int)}
+    good, bad = tmp_path / "good.npy", tmp_path / "bad.npy"
+    np.save(good, np.array([0, 1] * 5))
+    np.save(bad, np.array([0, 2] * 5))
+    ((name, mask),) = bench.splits(dataset, 0, good)
+    assert name == "split" and mask.sum() == 5
+    with pytest.raises(ValueError, match="0 \\(train\\) or 1 \\(test\\)"):
+        bench.splits(dataset, 0, bad)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [(["--models", "resnet"], "unknown models"), (["--folds", "1"], "--folds"), ([], "TORCH_EDGEVF_PSB")],
+)
+def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
+    monkeypatch.delenv("TORCH_EDGEVF_PSB", raising=False)
+    data = [] if message == "TORCH_EDGEVF_PSB" else ["--data", str(tmp_path / "x.npz")]
+    with pytest.raises(SystemExit) as exc:
+        bench.main(data + argv)
+    assert exc.value.code == 2 and message in capsys.readouterr().err
