@@ -18,6 +18,7 @@ def bench():
     return module
 
 
+@pytest.mark.slow
 def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
     out = tmp_path / "runs.json"
     results = bench.main(

@@ -189,7 +189,7 @@ class Transporter:
                 with torch.no_grad():
                     ratio = self.norm(z.detach()) / torch.where(norm0 > 0, norm0, 1)
                     growth = torch.maximum(growth, ratio - 1)
-        if check and float(growth.max()) > self.growth_tol:
+        if check and self.growth_tol is not None and float(growth.max()) > self.growth_tol:
             self._warn_growth(float(growth.max()), float(t), steps)
         return z
 

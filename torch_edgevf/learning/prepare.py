@@ -104,7 +104,7 @@ def prepare_psb(src_dir, out, faces: int = 2000, show_progress: bool | None = No
     for psb_id, path in progress(list(files.items()), desc="PSB meshes", enabled=show_progress):
         # trimesh reads the file (torch_edgevf.io sits above this layer); process=True
         # merges duplicated vertices and drops degenerate faces
-        mesh = trimesh.load(path, file_type="off", force="mesh", process=True)
+        mesh: trimesh.Trimesh = trimesh.load(path, file_type="off", force="mesh", process=True)  # type: ignore[assignment]
         v, f = _decimate(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces), faces)
         try:
             topo = Topology(f, num_vertices=len(v))

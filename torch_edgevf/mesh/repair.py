@@ -682,7 +682,7 @@ def _triangulate(faces, nv: int, check: bool = True):
         if k < 3:
             continue
         rows = np.flatnonzero(sizes == k)
-        block = faces.astype(np.int64) if uniform else np.stack([polys[i] for i in rows])
+        block = faces.astype(np.int64) if uniform else np.stack([polys[int(i)] for i in rows])
         srt = np.sort(block, axis=1)
         repeated = (srt[:, 1:] == srt[:, :-1]).any(1)
         clean, crow = block[~repeated], rows[~repeated]
