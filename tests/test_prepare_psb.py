@@ -119,6 +119,9 @@ def test_command_line(benchmark, tmp_path):
     r = _edgevf("prepare-psb", str(benchmark), "out.npz", "--faces", "100", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert "wrote out.npz: 20 meshes" in r.stdout
+    quiet = _edgevf("prepare-psb", str(benchmark), "quiet.npz", "--faces", "100", "-q", cwd=tmp_path)
+    assert quiet.returncode == 0, quiet.stderr  # global flags after the subcommand too
+    assert (tmp_path / "quiet.npz").exists()
     with np.load(tmp_path / "out.npz") as d:
         assert len(d["labels"]) == 20 and np.diff(d["face_offsets"]).max() <= 100
     bad = _edgevf("prepare-psb", str(tmp_path / "nowhere"), "out.npz", cwd=tmp_path)

@@ -631,6 +631,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=cmd_bench)
     r = sub.add_parser(
         "prepare-psb",
+        parents=[common],
         help="build psb_watertight_2k.npz from the Princeton Segmentation Benchmark's OFF files",
     )
     r.add_argument("src_dir", metavar="SRC_DIR", help="the benchmark's data folder (with off/1.off ...)")
