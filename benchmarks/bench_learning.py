@@ -35,7 +35,7 @@ import torch
 from torch_edgevf.learning import models
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.cache import OperatorCache
-from torch_edgevf.learning.datasets import psb_path
+from torch_edgevf.learning.datasets import psb_mesh, psb_path
 from torch_edgevf.learning.precompute import heat_kernel_signature
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
@@ -58,9 +58,8 @@ def load_psb(path) -> dict:
     d = np.load(path, allow_pickle=False)
     meshes = []
     for i in range(len(d["labels"])):
-        v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]].astype(np.float64)
-        f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
-        meshes.append((v, f))
+        v, f = psb_mesh(d, i)
+        meshes.append((v.astype(np.float64), f))
     return {
         "meshes": meshes,
         "labels": d["labels"].astype(np.int64),

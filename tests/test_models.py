@@ -10,7 +10,7 @@ import pytest
 import torch
 import trimesh
 
-from torch_edgevf.learning import batching, models, precompute
+from torch_edgevf.learning import batching, datasets, models, precompute
 
 from conftest import perturbed_icosphere, psb_file
 
@@ -160,8 +160,8 @@ def test_edge_field_net_learns_psb_classes():
     train, test = [], []
     for label, c in enumerate(classes):
         for i in np.flatnonzero(d["labels"] == c):
-            v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]].astype(np.float64)
-            f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
+            v, f = datasets.psb_mesh(d, i)
+            v = v.astype(np.float64)
             (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
     torch.manual_seed(0)
     net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,))

@@ -18,7 +18,7 @@ from .progress import progress
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PSBDataset", "PSB_ENV", "psb_path"]
+__all__ = ["PSBDataset", "PSB_ENV", "psb_path", "psb_mesh"]
 
 PSB_ENV = "TORCH_EDGEVF_PSB"
 """Environment variable naming ``psb_watertight_2k.npz`` when no path is given."""
@@ -49,6 +49,13 @@ def psb_path(path=None) -> Path:
     if not path.is_file():
         raise ValueError(f"PSB file not found: {path}; {how}")
     return path
+
+
+def psb_mesh(arrays, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh ``i`` of the arrays of ``psb_watertight_2k.npz``: its vertices as stored
+    (float32) and its faces as int64, both ``(N, 3)``."""
+    vo, fo = arrays["vert_offsets"], arrays["face_offsets"]
+    return arrays["verts"][vo[i] : vo[i + 1]], arrays["faces"][fo[i] : fo[i + 1]].astype(np.int64)
 
 
 class PSBDataset(torch.utils.data.Dataset):
@@ -116,8 +123,7 @@ class PSBDataset(torch.utils.data.Dataset):
         self.dtype, self.hks_count = dtype, hks_count
         meshes, repaired, skipped = [], [], []
         for i in np.nonzero(keep)[0]:
-            v = d["verts"][d["vert_offsets"][i] : d["vert_offsets"][i + 1]]
-            f = d["faces"][d["face_offsets"][i] : d["face_offsets"][i + 1]].astype(np.int64)
+            v, f = psb_mesh(d, int(i))
             pid = int(d["psb_ids"][i])
             if len(find_degenerate_faces(v, f)):
                 if degenerate == "error":
