@@ -48,7 +48,7 @@ MODELS = {
     "edgefieldnet-fixedtime": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, learn_times=False),
 }
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
-OPERATOR_OPTIONS = dict(k_edge=64, k_vertex=128, vertex_gradient=True)
+OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
 
 
 # --------------------------------------------------------------------------- data

@@ -42,7 +42,7 @@ def default_cache_dir() -> Path:
     return Path(os.environ.get("TORCH_EDGEVF_CACHE", Path.home() / ".cache" / "torch_edgevf" / "operators"))
 
 
-def load_datasets(ids=None, k_edge: int = 64, k_vertex: int = 128, cache_dir=None, path=None):
+def load_datasets(ids=None, k_edge: int = 32, k_vertex: int = 128, cache_dir=None, path=None):
     """The train and test :class:`~torch_edgevf.data.PSBDataset` (operators cached)."""
     cache_dir = default_cache_dir() if cache_dir is None else cache_dir
     kw = dict(path=path, cache_dir=cache_dir, k_edge=k_edge, k_vertex=k_vertex, ids=ids)
@@ -114,7 +114,7 @@ def markdown_table(results: list[dict]) -> str:
 
 
 def main(epochs: int = 60, width: int = 64, num_blocks: int = 4, seeds=(0, 1, 2), model_names=("edge", "diffusionnet"),
-         batch_size: int = 1, lr: float = 1e-3, k_edge: int = 64, k_vertex: int = 128, ids=None, cache_dir=None,
+         batch_size: int = 1, lr: float = 1e-3, k_edge: int = 32, k_vertex: int = 128, ids=None, cache_dir=None,
          num_workers: int = 0, threads: int = 1) -> dict:
     """Run the protocol; returns ``{"results": [...], "table": markdown, "operator_seconds": ...}``."""
     torch.set_num_threads(threads)
