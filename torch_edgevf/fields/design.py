@@ -520,8 +520,8 @@ class FieldDesigner:
             the angle-based square of ``w_e = i beta_e / |e|``, i.e.
             ``z2_e = -|beta_e| / |e|`` (largest absolute curvature). Exact on regular
             meshes (a cylinder), but the ``1 / |e|`` weight favours short edges, which on
-            stretched meshes leaves a bias that does not fall under refinement (measured on
-            an icosphere-mapped ellipsoid: mean angle error 0.11 rad at every level).
+            stretched meshes leaves a bias that does not fall under refinement (on an
+            ellipsoid, the mean angle error stays constant as the mesh is refined).
 
         The line field is then heat-diffused with ``L_c^(2)`` (:meth:`diffuse`, implicit
         Euler in 4 steps) and, for ``n = 2 m``, raised to ``z_n = |z2| e^{i m arg z2}``

@@ -53,30 +53,23 @@ logger = logging.getLogger(__name__)
 METHODS = ("auto", "cholesky", "lu")
 
 #: CHOLMOD factorization mode.  ``"simplicial"`` (an up-looking :math:`LDL^H` without
-#: BLAS calls) beats ``"supernodal"`` on the mesh operators here: the factor has about a
-#: third fewer stored entries (no supernode padding), and with the reference BLAS that
-#: Debian/Ubuntu's CHOLMOD links by default the supernodal kernels are slow.  On
-#: :math:`L_c - \sigma M_z` (2 cores, one BLAS thread): Spot (34,593 edges) factor 67 ms
-#: vs 90-160 ms, one solve 2.5 ms vs 4.5 ms; icosphere level 6 (122,880 edges) factor
-#: 1.0 s vs 0.75-1.1 s, one solve 21 ms vs 44 ms.  The iterative solvers make tens to
-#: hundreds of solves per factorization, so the solve speed decides.
+#: BLAS calls) rather than ``"supernodal"``: on the mesh operators its factor has about a
+#: third fewer stored entries (no supernode padding) and its solves are faster, while the
+#: supernodal kernels depend on the BLAS that CHOLMOD links.  The iterative solvers make
+#: tens to hundreds of solves per factorization, so the solve speed decides.  Timings:
+#: ``benchmarks/results/linalg_notes.md``.
 CHOLMOD_MODE = "simplicial"
 
 
 #: ``scipy.sparse.linalg.splu`` options of the symmetric mode (``"superlu-hermitian"``):
 #: ordering ``MMD_AT_PLUS_A`` applied to rows and columns, diagonal pivots, and no relaxed
-#: supernodes (``relax=1``).  With SuperLU's default relaxation (small subtrees of the
-#: elimination tree amalgamated into dense blocks), the time depended on the numbering of
-#: the input, not on the fill: :math:`L_c + 0.1 M_z` of ``trimesh.creation.icosphere(5)``
-#: took 30-50 s to factor against 0.3-0.5 s for :func:`torch_edgevf.icosphere` (5), with
-#: the same 1,336,558 entries in the factors, and each solve 2-10x longer; a subdivided
-#: ``trimesh.creation.box`` was 7-10x slower than SciPy's default ``splu``.  Almost all of
-#: it went to the dense panel updates.  (In symmetric mode SuperLU does not postorder the
-#: elimination tree, while its relaxed supernodes are found on a postorder and mapped back
-#: to the column order.)  Without relaxation both icospheres factor in the same time, and
-#: nothing is lost on the library's meshes (icosphere 5: 0.63 s against 0.64 s); the
-#: fundamental supernodes SuperLU finds during the factorization are kept.  The times
-#: against SciPy's default on generated meshes are in ``benchmarks/bench_linalg.py``.
+#: supernodes (``relax=1``).  In symmetric mode SuperLU does not postorder the elimination
+#: tree, while its relaxed supernodes (small subtrees amalgamated into dense blocks) are
+#: found on a postorder and mapped back to the column order; with the default relaxation
+#: the dense panel updates, and so the factorization time, depend on the numbering of the
+#: input rather than on the fill.  Without relaxation the time follows the fill for every
+#: numbering; the fundamental supernodes SuperLU finds during the factorization are kept.
+#: Timings: ``benchmarks/results/superlu_symmetric_mode.md`` and ``benchmarks/bench_linalg.py``.
 SYMMETRIC_MODE = {
     "permc_spec": "MMD_AT_PLUS_A",
     "diag_pivot_thresh": 0.0,

@@ -465,7 +465,7 @@ def unique_pairs(
     indices have ``index_dtype``.
 
     When they fit, the key and the pair's position are packed into one int64 so that
-    a plain in-place sort (about 3x faster than an argsort) gives both the order and the keys.
+    a plain in-place sort, cheaper than an argsort, gives both the order and the keys.
     """
     keys = np.asarray(lo).astype(np.int64)  # a copy: worked on in place below
     keys *= nv
