@@ -408,11 +408,13 @@ def _operator_problems(verts, topo) -> list[str]:
 
 
 def cmd_info(args) -> int:
-    """Every problem of the file at once (also those the loader rejects) and what repair would do."""
+    """Every problem of the file at once (also those the loader rejects, and zero-width cracks)
+    and what repair would do, also with the flags that close the cracks."""
     import numpy as np
 
     from .mesh.repair import repair
 
+    tol = _crack_tol(args)
     verts, faces, report = _read_soup(args.mesh)
     print(report)
     problems = []
@@ -435,10 +437,11 @@ def cmd_info(args) -> int:
         result = None
     else:
         try:
-            result = repair(verts, faces)
+            result = repair(verts, faces, tol=tol)
         except ValueError as exc:
             problems.append(str(exc))
             result = None
+    fix_flags: list[str] = []
     if result is not None:
         rep = result.report
         if rep.duplicate_faces:
@@ -455,6 +458,21 @@ def cmd_info(args) -> int:
             )
         if rep.unreferenced_vertices and not report.nonfinite_vertices:
             problems.append(f"{len(rep.unreferenced_vertices)} unreferenced vertices")
+        if rep.coincident_vertices:
+            fix_flags.append("--merge-coincident")
+            problems.append(
+                f"{len(rep.coincident_vertices)} pairs of coincident vertices (distinct vertices at one "
+                f"position, within {tol:g} of the bounding-box diagonal: a zero-width crack) at vertex "
+                f"pairs [{_some(rep.coincident_vertices)}]; 'edgevf repair --merge-coincident' merges them"
+            )
+        if rep.t_junctions:
+            fix_flags.append("--split-t-junctions")
+            rows = [f"{w} in ({a}, {b}) of face {f}" for w, a, b, f in rep.t_junctions]
+            problems.append(
+                f"{len(rows)} T-junctions (a boundary vertex inside a boundary edge of another face: "
+                f"a zero-width crack) at [{_some(rows)}]; 'edgevf repair --split-t-junctions' splits "
+                "those faces at the vertices"
+            )
         topo = result.topology
         problems += _operator_problems(result.verts, topo)
         print(
@@ -466,7 +484,38 @@ def cmd_info(args) -> int:
     if result is not None and problems:
         print("what 'edgevf repair' would do:")
         print(result.report.summary())
+    if fix_flags:
+        print(f"what 'edgevf repair {' '.join(fix_flags)}' would do:")
+        try:
+            fixed = repair(
+                verts,
+                faces,
+                merge_coincident="--merge-coincident" in fix_flags,
+                split_t_junctions="--split-t-junctions" in fix_flags,
+                tol=tol,
+            )
+        except ValueError as exc:
+            print(f"  it fails: {exc}")
+        else:
+            print(fixed.report.summary())
     return 1 if problems else 0
+
+
+def _crack_tol(args) -> float:
+    """The ``--tol`` of info and repair (the library's default when not given)."""
+    from .mesh.diagnose import COINCIDENT_TOL
+
+    return COINCIDENT_TOL if getattr(args, "tol", None) is None else args.tol
+
+
+def _tolerance(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0 <= value < 1:
+        raise argparse.ArgumentTypeError(f"must be a number in [0, 1), got {value}")
+    return value
 
 
 def _some(items, limit: int = 10) -> str:
@@ -488,7 +537,13 @@ def cmd_repair(args) -> int:
             f"{int(outside.sum())} faces have vertex indices outside [0, {len(verts)}) at faces "
             f"[{_some(np.flatnonzero(outside).tolist())}]"
         )
-    result = repair(verts, faces)
+    result = repair(
+        verts,
+        faces,
+        merge_coincident=args.merge_coincident,
+        split_t_junctions=args.split_t_junctions,
+        tol=_crack_tol(args),
+    )
     print(result.report.summary())
     save_mesh(args.output, result.verts, result.faces)
     print(f"wrote {args.output}")
@@ -496,6 +551,7 @@ def cmd_repair(args) -> int:
         np.savez(
             args.maps,
             vertex_origin=result.vertex_origin.numpy(),
+            merged_to=result.merged_to.numpy() if result.merged_to is not None else np.arange(len(verts)),
             face_origin=result.face_origin.numpy(),
             flipped=result.flipped.numpy(),
             edges=result.topology.edges.numpy(),
@@ -605,6 +661,13 @@ def build_parser() -> argparse.ArgumentParser:
         "info", parents=[common], help="topology of a mesh and any problems found, with their locations"
     )
     i.add_argument("mesh", nargs="?", default=None)
+    i.add_argument(
+        "--tol",
+        type=_tolerance,
+        default=None,
+        help="tolerance of the coincident-vertex and T-junction checks, relative to the bounding-box "
+        "diagonal (default 1e-6; 0: identical positions only)",
+    )
     i.set_defaults(func=cmd_info)
     rp = sub.add_parser(
         "repair",
@@ -616,8 +679,24 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument(
         "--maps",
         default=None,
-        help=".npz file for the maps to the input (vertex_origin, face_origin, flipped) and the "
-        "(mollified) edge lengths",
+        help=".npz file for the maps to the input (vertex_origin, merged_to, face_origin, flipped) "
+        "and the (mollified) edge lengths",
+    )
+    rp.add_argument(
+        "--merge-coincident",
+        action="store_true",
+        help="merge coincident vertices, closing zero-width cracks (default: report them only)",
+    )
+    rp.add_argument(
+        "--split-t-junctions",
+        action="store_true",
+        help="split faces at T-junction vertices, closing the crack (default: report them only)",
+    )
+    rp.add_argument(
+        "--tol",
+        type=_tolerance,
+        default=None,
+        help="tolerance of both checks, relative to the bounding-box diagonal (default 1e-6)",
     )
     rp.set_defaults(func=cmd_repair)
     b = sub.add_parser("bench", parents=[common], help=f"quick timings on {BUILT_IN} and icospheres")

@@ -6,6 +6,12 @@ vertices and faces to the input ones, edge lengths that are valid even where fac
 zero area (intrinsic mollification), and a :class:`RepairReport` that names every
 element that was changed. No vertex is ever moved; the input is never modified.
 
+Zero-width cracks (coincident vertices, where a vertex was split at one position, and
+T-junctions; see :mod:`~torch_edgevf.mesh.diagnose`) are valid boundaries to the
+topology: :func:`repair` always reports them and closes them only when asked
+(``merge_coincident=True``, ``split_t_junctions=True``), since either changes the
+topology the input describes.
+
 :func:`repair_degenerate_faces` is the older, extrinsic alternative for closed manifold
 meshes: it removes zero-area faces by edge collapse.
 """
@@ -22,6 +28,7 @@ import torch
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from .._validation import list_some
+from .diagnose import COINCIDENT_TOL, _check_tol, _coincident_pairs, _t_junctions
 from .geometry import FaceGeometry
 from .topology import Topology
 
@@ -182,6 +189,21 @@ class RepairReport:
     repeated_index_faces : input faces with a repeated vertex index (the repeats removed;
         what is left of fewer than three vertices is dropped)
     nonfinite_vertices : vertices with NaN or Inf coordinates (their faces are dropped)
+    coincident_vertices : ``(i, j)`` pairs, ``i < j``, of distinct referenced vertices at one
+        position (within ``tol``, see
+        :func:`~torch_edgevf.mesh.diagnose.find_coincident_vertices`); found always, merged
+        only with ``merge_coincident=True``
+    merged_vertices : ``{input vertex: the input vertex it was merged into}`` (the lowest
+        index of its cluster of coincident vertices), with ``merge_coincident=True``
+    collapsed_faces : input faces with a triangle that merging left with a repeated vertex
+        (that triangle is dropped)
+    t_junctions : ``(vertex, a, b, face)``: the input vertex ``vertex`` lies inside the
+        boundary edge ``(a, b)``, ``a < b``, of input face ``face`` (see
+        :func:`~torch_edgevf.mesh.diagnose.find_t_junctions`; after merging, if asked);
+        found always, split only with ``split_t_junctions=True``
+    split_faces : input faces whose triangle was split at T-junction vertices, with
+        ``split_t_junctions=True``
+    t_junction_triangles : how many triangles those splits added
     duplicate_faces : ``(face, first)`` pairs, ``face`` has the vertices of ``first``
         (any order or winding) and is dropped
     dropped_faces : ``{input face: reason}`` for every input face of which no triangle is
@@ -208,6 +230,12 @@ class RepairReport:
     added_triangles: int = 0
     repeated_index_faces: list[int] = field(default_factory=list)
     nonfinite_vertices: list[int] = field(default_factory=list)
+    coincident_vertices: list[tuple[int, int]] = field(default_factory=list)
+    merged_vertices: dict[int, int] = field(default_factory=dict)
+    collapsed_faces: list[int] = field(default_factory=list)
+    t_junctions: list[tuple[int, int, int, int]] = field(default_factory=list)
+    split_faces: list[int] = field(default_factory=list)
+    t_junction_triangles: int = 0
     duplicate_faces: list[tuple[int, int]] = field(default_factory=list)
     dropped_faces: dict[int, str] = field(default_factory=dict)
     flipped_faces: list[int] = field(default_factory=list)
@@ -225,12 +253,20 @@ class RepairReport:
         """Whether anything was changed (other than nothing)."""
         return bool(self.changes())
 
+    @property
+    def cracks(self) -> bool:
+        """Whether coincident vertices or T-junctions were found (merged, split or not)."""
+        return bool(self.coincident_vertices or self.t_junctions)
+
     def changes(self) -> dict[str, int]:
         """``{kind of change: count}`` for every kind that occurred."""
         counts = {
             "triangulated polygons": len(self.triangulated_faces),
             "faces with repeated indices": len(self.repeated_index_faces),
             "non-finite vertices": len(self.nonfinite_vertices),
+            "coincident vertices merged": len(self.merged_vertices),
+            "faces collapsed by merging": len(self.collapsed_faces),
+            "faces split at T-junctions": len(self.split_faces),
             "duplicate faces": len(self.duplicate_faces),
             "dropped faces": len(self.dropped_faces),
             "flipped faces": len(self.flipped_faces),
@@ -256,6 +292,29 @@ class RepairReport:
         add(self.triangulated_faces, f"polygons triangulated (+{self.added_triangles} triangles), faces")
         add(self.repeated_index_faces, "faces with a repeated vertex index (repeats removed), faces")
         add(self.nonfinite_vertices, "vertices with NaN or Inf coordinates (their faces dropped)")
+        if self.merged_vertices:
+            add(
+                [f"{a} -> {b}" for a, b in self.merged_vertices.items()],
+                f"coincident vertices merged ({len(self.coincident_vertices)} pairs found)",
+            )
+        else:
+            add(
+                self.coincident_vertices,
+                "coincident vertex pairs found, not merged "
+                "(merge_coincident=True or --merge-coincident merges them)",
+            )
+        add(self.collapsed_faces, "faces with a triangle collapsed by the merge (dropped)")
+        if self.split_faces:
+            add(
+                self.split_faces,
+                f"faces split at {len(self.t_junctions)} T-junction vertices "
+                f"(+{self.t_junction_triangles} triangles), faces",
+            )
+        else:
+            add(
+                [f"{w} in ({a}, {b}) of face {f}" for w, a, b, f in self.t_junctions],
+                "T-junctions found, not split (split_t_junctions=True or --split-t-junctions splits them)",
+            )
         add([f"{a} (= {b})" for a, b in self.duplicate_faces], "duplicate faces dropped")
         if self.dropped_faces:
             reasons: dict[str, list[int]] = {}
@@ -332,7 +391,8 @@ class RepairResult:
     verts : (V', 3) tensor, positions of the repaired vertices (copies of input positions)
     faces : (F', 3) int64 tensor, counter-clockwise triangles, manifold and consistently
         oriented per component
-    vertex_origin : (V',) int64 tensor, the input vertex of each vertex (several for a split one)
+    vertex_origin : (V',) int64 tensor, the input vertex of each vertex (several for a split
+        one; for merged coincident vertices, the one they were merged into)
     face_origin : (F',) int64 tensor, the input face of each triangle
     flipped : (F',) bool tensor, triangles whose winding is reversed from the input's
     topology : :class:`Topology` of ``faces``
@@ -340,6 +400,11 @@ class RepairResult:
         positions, mollified where faces lacked the margin (then ``epsilon > 0``)
     epsilon : float, the length added to every edge (0 when no face needed it)
     report : :class:`RepairReport`
+    input_edges : (E_in, 2) int64 tensor, the sides of the input polygons ``i < j``
+    num_input_faces, num_input_vertices : counts of the input
+    merged_to : (V_in,) int64 tensor, the input vertex each input vertex was merged into
+        (itself unless ``merge_coincident`` merged it); ``merged_to[vertex_origin]`` is
+        ``vertex_origin``
 
     Use ``(result.verts, result.topology)`` for the operators when ``epsilon == 0``, and
     ``(result.geometry, result.topology)`` otherwise (always valid): the operators, field
@@ -358,6 +423,12 @@ class RepairResult:
     input_edges: torch.Tensor
     num_input_faces: int
     num_input_vertices: int
+    merged_to: torch.Tensor | None = None
+
+    def _merged_to(self) -> np.ndarray:
+        if self.merged_to is None:
+            return np.arange(self.num_input_vertices)
+        return self.merged_to.numpy()
 
     @property
     def mollified(self) -> bool:
@@ -388,8 +459,11 @@ class RepairResult:
 
         An input edge with exactly one image gets its value in ``values``; an edge cut into
         several (non-manifold edges, edges at split vertices) gets NaN there and has one
-        value per face in ``face_values``. Diagonals added by triangulating polygons are
-        not input edges and appear only in ``face_values``.
+        value per face in ``face_values``. Diagonals added by triangulating polygons or
+        splitting faces at T-junctions are not input edges and appear only in
+        ``face_values``; an input edge split at a T-junction vertex has no image (NaN).
+        Where coincident vertices were merged, the input edges of both sides of the
+        closed crack take the value of the one repaired edge between them.
 
         Parameters
         ----------
@@ -413,23 +487,28 @@ class RepairResult:
         vo = self.vertex_origin.numpy()
         e = topo.edges.numpy()
         oa, ob = vo[e[:, 0]], vo[e[:, 1]]
-        reverse = torch.from_numpy(oa > ob).to(z.device)
-        sign = torch.where(reverse, -1.0 if n % 2 else 1.0, 1.0).to(z.real.dtype)
+        odd = -1.0 if n % 2 else 1.0
+        sign = torch.where(torch.from_numpy(oa > ob).to(z.device), odd, 1.0).to(z.real.dtype)
         zin = z * (sign if z.dim() == 1 else sign[:, None])
-        lo, hi = np.minimum(oa, ob), np.maximum(oa, ob)
         nv = max(self.num_input_vertices, 1)
-        inp = self.input_edges.numpy()
-        in_keys = inp[:, 0] * nv + inp[:, 1]
-        keys = lo * nv + hi
-        pos = np.searchsorted(in_keys, keys)
-        pos = np.minimum(pos, max(len(in_keys) - 1, 0))
-        is_input = in_keys[pos] == keys if len(in_keys) else np.zeros(len(keys), dtype=bool)
-        images = np.bincount(pos[is_input], minlength=len(in_keys))
+        keys = np.minimum(oa, ob) * nv + np.maximum(oa, ob)
+        order = np.argsort(keys, kind="stable")
+        sorted_keys = keys[order]
+        inp = self.input_edges.numpy().reshape(-1, 2)
+        rep = self._merged_to()
+        ra, rb = rep[inp[:, 0]], rep[inp[:, 1]]  # the input edge runs from ra to rb
+        in_keys = np.minimum(ra, rb) * nv + np.maximum(ra, rb)
+        first = np.searchsorted(sorted_keys, in_keys, side="left")
+        images = np.searchsorted(sorted_keys, in_keys, side="right") - first
+        images[ra == rb] = 0  # an edge collapsed by merging
+        single = np.flatnonzero(images == 1)
+        j = order[first[single]]  # the repaired edge of each
+        flip = torch.from_numpy(oa[j] != ra[single]).to(z.device)
         shape = (len(in_keys),) + tuple(z.shape[1:])
         values = torch.full(shape, complex("nan"), dtype=z.dtype, device=z.device)
-        single = is_input & (images[pos] == 1)
-        idx = torch.from_numpy(pos[single]).to(z.device)
-        values[idx] = zin[torch.from_numpy(np.flatnonzero(single)).to(z.device)]
+        s_edge = torch.where(flip, odd, 1.0).to(z.real.dtype)
+        zj = z[torch.from_numpy(j).to(z.device)]
+        values[torch.from_numpy(single).to(z.device)] = zj * (s_edge if z.dim() == 1 else s_edge[:, None])
         fe = topo.face_edges.to(z.device)
         return MappedEdgeField(
             edges=self.input_edges.clone(),
@@ -461,7 +540,8 @@ class RepairResult:
     def map_vertex_values(self, x) -> torch.Tensor:
         """Per-vertex values of the repaired mesh on the input vertices: (V_in,) or (V_in, C).
 
-        The mean over the copies of a split vertex; NaN for dropped vertices.
+        The mean over the copies of a split vertex; a merged coincident vertex takes the
+        value of the vertex it was merged into; NaN for dropped vertices.
         """
         x = torch.as_tensor(x)
         if x.shape[0] != self.topology.num_vertices:
@@ -477,10 +557,21 @@ class RepairResult:
             0, origin, torch.ones(origin.shape[0], dtype=x.real.dtype, device=x.device)
         )
         count = count if x.dim() == 1 else count[:, None]
-        return torch.where(count > 0, total / torch.where(count > 0, count, 1.0), float("nan"))
+        out = torch.where(count > 0, total / torch.where(count > 0, count, 1.0), float("nan"))
+        if self.merged_to is not None:
+            out = out[self.merged_to.to(x.device)]
+        return out
 
 
-def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult:
+def repair(
+    verts,
+    faces,
+    mollify_factor: float = MOLLIFY_FACTOR,
+    *,
+    merge_coincident: bool = False,
+    split_t_junctions: bool = False,
+    tol: float = COINCIDENT_TOL,
+) -> RepairResult:
     """Turn a triangle (or polygon) soup into a mesh the operators accept, reporting every change.
 
     In order, on copies (the input is never modified and no vertex is moved):
@@ -488,15 +579,25 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
     1. polygons are triangulated as fans from their first corner; repeated vertex indices
        are removed from each face (what has fewer than three vertices left is dropped);
     2. faces using a vertex with NaN or Inf coordinates are dropped;
-    3. duplicate faces (the same three vertices, in any order) are dropped, the first kept;
-    4. edges shared by more than two faces (non-manifold) are cut: each of those faces
+    3. coincident vertices (distinct referenced vertices within ``tol`` times the
+       bounding-box diagonal, :func:`~torch_edgevf.mesh.diagnose.find_coincident_vertices`)
+       are reported; with ``merge_coincident`` each cluster of them is merged into its
+       lowest index, which closes a zero-width crack (triangles left with a repeated
+       vertex are dropped);
+    4. duplicate faces (the same three vertices, in any order) are dropped, the first kept;
+    5. T-junctions (a boundary vertex inside a boundary edge of another face,
+       :func:`~torch_edgevf.mesh.diagnose.find_t_junctions`) are reported; with
+       ``split_t_junctions`` the triangle of that edge is split at each such vertex, a fan
+       from its opposite corner with the winding kept, so that both sides of the crack
+       share the pieces of the edge;
+    6. edges shared by more than two faces (non-manifold) are cut: each of those faces
        keeps its own copy of the edge, a boundary edge;
-    5. each sheet (faces connected through manifold edges) is oriented consistently by
+    7. each sheet (faces connected through manifold edges) is oriented consistently by
        flipping the minority of its faces; a sheet that cannot be oriented (a Moebius
        strip) raises ``ValueError``;
-    6. vertices whose faces then form several fans (bowties, ends of cut edges) are split,
+    8. vertices whose faces then form several fans (bowties, ends of cut edges) are split,
        one copy per fan; unreferenced vertices are dropped;
-    7. zero-area and needle faces are handled by intrinsic mollification
+    9. zero-area and needle faces are handled by intrinsic mollification
        (:func:`mollify_lengths`): the edge lengths, not the positions, are changed.
 
     Parameters
@@ -506,6 +607,12 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
         (polygons of any sizes)
     mollify_factor : float >= 0, the margin of the triangle inequality relative to the
         mean edge length
+    merge_coincident : bool, merge coincident vertices (default: report them only, since
+        merging changes the topology); ``vertex_origin`` then names the vertex each
+        cluster was merged into and ``merged_to`` maps every input vertex to it
+    split_t_junctions : bool, split faces at T-junction vertices (default: report only)
+    tol : float in [0, 1), the tolerance of both crack checks relative to the
+        bounding-box diagonal of the referenced vertices (0: bitwise-equal positions)
 
     Returns
     -------
@@ -514,9 +621,13 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
     Raises
     ------
     ValueError
-        Wrong shapes or dtypes, indices out of range, nothing left, or a non-orientable
-        sheet (naming its faces).
+        Wrong shapes or dtypes, indices out of range, nothing left, a non-orientable
+        sheet (naming its faces), or a bad option.
     """
+    for name, flag in (("merge_coincident", merge_coincident), ("split_t_junctions", split_t_junctions)):
+        if not isinstance(flag, (bool, np.bool_)):
+            raise ValueError(f"{name} must be True or False, got {flag!r}")
+    tol = _check_tol(tol)
     v, out_dtype = _positions(verts)
     nv = v.shape[0]
     tri, origin, report, polys, sides = _triangulate(faces, nv)
@@ -534,6 +645,17 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
     if not finite.all():
         report.nonfinite_vertices = np.flatnonzero(~finite).tolist()
         drop((~finite[tri]).any(1), "a vertex with NaN or Inf coordinates")
+    pairs = _coincident_pairs(v, tri, tol)
+    report.coincident_vertices = [(int(a), int(b)) for a, b in pairs]
+    merged_to = np.arange(nv)
+    if merge_coincident and len(pairs):
+        merged_to = _merge_clusters(pairs, nv)
+        moved = np.flatnonzero(merged_to != np.arange(nv))
+        report.merged_vertices = {int(i): int(merged_to[i]) for i in moved}
+        tri = merged_to[tri]
+        collapsed = (tri[:, 0] == tri[:, 1]) | (tri[:, 1] == tri[:, 2]) | (tri[:, 2] == tri[:, 0])
+        report.collapsed_faces = np.unique(origin[collapsed]).tolist()
+        drop(collapsed, "collapsed by merging coincident vertices")
     # duplicates, the first occurrence kept
     if len(tri):
         _, first, inverse = np.unique(np.sort(tri, axis=1), axis=0, return_index=True, return_inverse=True)
@@ -557,10 +679,21 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
     if len(tri) == 0:
         raise ValueError("repair: no faces left (all were dropped: " + report.summary() + ")")
 
+    junctions = _t_junctions(v, tri, tol)
+    w, t, k, _ = junctions
+    a, b = tri[t, (k + 1) % 3], tri[t, (k + 2) % 3]
+    report.t_junctions = [
+        (int(x), int(p), int(q), int(f))
+        for x, p, q, f in zip(w, np.minimum(a, b), np.maximum(a, b), origin[t])
+    ]
+    if split_t_junctions and len(w):
+        tri, origin = _split_at_t_junctions(v, tri, origin, tol, junctions, report)
+
     tri, flipped = _orient(tri, origin, nv, report)
     new_faces, vertex_origin = _split_vertices(tri, nv, report)
     used = np.zeros(nv, dtype=bool)
     used[tri.ravel()] = True
+    used[list(report.merged_vertices)] = True  # merged, not unreferenced
     report.unreferenced_vertices = np.flatnonzero(~used).tolist()
     try:
         topo = Topology(torch.from_numpy(new_faces), num_vertices=len(vertex_origin))
@@ -598,10 +731,65 @@ def repair(verts, faces, mollify_factor: float = MOLLIFY_FACTOR) -> RepairResult
         input_edges=torch.from_numpy(sides),
         num_input_faces=report.input_faces,
         num_input_vertices=nv,
+        merged_to=torch.from_numpy(merged_to),
     )
-    if report.changed:
+    if report.changed or report.cracks:
         log.info("%s", report)
     return result
+
+
+def _merge_clusters(pairs: np.ndarray, nv: int) -> np.ndarray:
+    """(V,) map of each vertex to the lowest index of its cluster (pairs joined transitively)."""
+    graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(nv, nv))
+    _, labels = connected_components(graph, directed=False)
+    lowest = np.full(labels.max() + 1, nv, dtype=np.int64)
+    np.minimum.at(lowest, labels, np.arange(nv))
+    return lowest[labels]
+
+
+def _split_at_t_junctions(v, tri, origin, tol, junctions, report: RepairReport, max_rounds: int = 8):
+    """Split triangles at their T-junction vertices until none is left; fill the report.
+
+    Each round splits every triangle along one of its edges (the first with T-junction
+    vertices): the triangle ``(a, b, c)`` whose edge ``a -> b`` holds the vertices
+    ``w_1, ..., w_m`` (in order from ``a``) becomes the fan ``(a, w_1, c), (w_1, w_2, c),
+    ..., (w_m, b, c)`` with the same winding. The other two edges are edges of the new
+    triangles, so the next round (a fresh search) finds their T-junctions again.
+    """
+    split: list[np.ndarray] = []
+    before = len(tri)
+    w, t, k, _ = junctions
+    for _round in range(max_rounds):
+        if not len(w):
+            break
+        # rows are sorted by triangle, corner, position: keep the first corner of each triangle
+        first_k = np.full(len(tri), 3)
+        np.minimum.at(first_k, t, k)
+        sel = k == first_k[t]
+        w, t, k = w[sel], t[sel], k[sel]
+        start = np.r_[True, t[1:] != t[:-1]]
+        end = np.r_[t[1:] != t[:-1], True]
+        a, b, c = tri[t, (k + 1) % 3], tri[t, (k + 2) % 3], tri[t, k]
+        prev = np.where(start, a, np.r_[0, w[:-1]])
+        fans = np.concatenate([np.stack([prev, w, c], 1), np.stack([w[end], b[end], c[end]], 1)])
+        fan_origin = np.concatenate([origin[t], origin[t[end]]])
+        split.append(origin[t[end]])
+        keep = np.ones(len(tri), dtype=bool)
+        keep[t] = False
+        tri = np.concatenate([tri[keep], fans])
+        origin = np.concatenate([origin[keep], fan_origin])
+        order = np.argsort(origin, kind="stable")  # triangles in the order of their faces
+        tri, origin = tri[order], origin[order]
+        w, t, k, _ = _t_junctions(v, tri, tol)
+    else:
+        if len(w):  # not expected: each round removes the T-junctions of one edge per face
+            raise ValueError(
+                f"repair: T-junctions left after {max_rounds} rounds of splitting, at input faces "
+                f"[{list_some(np.unique(origin[t]).tolist())}]"
+            )
+    report.split_faces = np.unique(np.concatenate(split)).tolist() if split else []
+    report.t_junction_triangles = int(len(tri) - before)
+    return np.ascontiguousarray(tri), origin
 
 
 def _positions(verts) -> tuple[np.ndarray, torch.dtype]:
