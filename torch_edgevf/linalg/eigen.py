@@ -141,8 +141,9 @@ class _Eigsh(torch.autograd.Function):
     ):
         A = a_data.to_scipy()
         M = m_data.to_scipy().astype(A.real.dtype)
-        if sigma is None:
-            sigma = default_shift(A, M)
+        # the pencil divided by powers of two (exact): the same numbers at every scale
+        A, M, scaling = lanczos.normalize_pair(A, M)
+        sigma = default_shift(A, M) if sigma is None else scaling.normalized_shift(sigma)
         ctx.factor = None
         if method == "auto":
             method = "dense" if lanczos.dense_is_faster(A.shape[0], k) else "lanczos"
@@ -152,8 +153,10 @@ class _Eigsh(torch.autograd.Function):
             lam, X, ctx.factor = lanczos.shift_invert_eigsh(
                 A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
             )
-        X = lanczos.fix_phase(X)
+        lam, X = scaling.values(lam), scaling.vectors(lanczos.fix_phase(X))
+        # the backward's complement solve runs on the normalised pair too
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
+        ctx.scaling = scaling
         ctx.a_data, ctx.m_data = a_data, m_data
         ctx.set_materialize_grads(False)
         lam_t = from_numpy(lam, a_values, real_dtype(a_values.dtype))
@@ -202,7 +205,7 @@ def _eigenvector_adjoint(ctx, lam, X, G):
     degenerate = diff.abs() <= ctx.degeneracy_rtol * scale
     degenerate.fill_diagonal_(False)
     skew = (XG - XG.conj().T).abs() * degenerate
-    if bool((skew > 1e-6 * (XG.abs().max() + 1e-300)).any()):
+    if bool((skew > 1e-6 * XG.abs().max().clamp_min(torch.finfo(lam.dtype).tiny)).any()):
         raise ValueError(
             "eigenvector gradient is undefined: the loss depends on the basis chosen inside "
             "a degenerate eigenspace; use a loss invariant to rotations within it "
@@ -223,16 +226,30 @@ def _complement_adjoint(ctx, lam, X, G):
     n, k = X.shape
     if k >= n:
         return torch.zeros_like(X)
-    A, M = ctx.A, ctx.M
-    Xn, Gn, lam_n = to_numpy(X), to_numpy(G), to_numpy(lam)
+    # on the normalised pair A = 2^a A', M = 2^m M' (lanczos.PairScaling): with X = 2^(-m/2) X'
+    # and lam = 2^(a - m) lam', (A - lam_i M) w_i = r_i is 2^a (A' - lam'_i M') w_i = r_i
+    # and M X X^H = M' X' X'^H, so w_i = 2^-a w'_i; r is divided by a power of two too,
+    # so that the CG's inner products neither under- nor overflow
+    A, M, scaling = ctx.A, ctx.M, ctx.scaling
+    Xn = scaling.normalized_vectors(to_numpy(X))
+    lam_n = scaling.normalized_values(to_numpy(lam))
+    Gn = to_numpy(G)
     R = Gn - (M @ Xn) @ (Xn.conj().T @ Gn)
+    r_exp = lanczos.binary_exponent(float(np.max(np.abs(R)))) if R.size else 0
     if ctx.factor is None:
         ctx.factor = factorize((A - ctx.sigma * M).tocsc(), "auto", hermitian=True, many_solves=True)
     eps = float(np.finfo(A.dtype).eps)
     W = _complement_solve(
-        A, M, Xn, lam_n, R, ctx.factor.solve, tol=max(1e-12, 10 * eps), maxiter=max(100, min(n, 1000))
+        A,
+        M,
+        Xn,
+        lam_n,
+        lanczos.ldexp(R, -r_exp),
+        ctx.factor.solve,
+        tol=max(1e-12, 10 * eps),
+        maxiter=max(100, min(n, 1000)),
     )
-    return from_numpy(W, X, X.dtype)
+    return from_numpy(lanczos.ldexp(W, r_exp - scaling.a_exp), X, X.dtype)
 
 
 # ------------------------------------------------------------------------------ public

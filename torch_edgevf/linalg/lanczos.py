@@ -36,6 +36,7 @@ Nothing here knows torch: arrays in, arrays out.
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -47,7 +48,16 @@ from .factor import factorize
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["METHODS", "default_shift", "dense_is_faster", "eig_dense", "fix_phase", "shift_invert_eigsh"]
+__all__ = [
+    "METHODS",
+    "PairScaling",
+    "default_shift",
+    "dense_is_faster",
+    "eig_dense",
+    "fix_phase",
+    "normalize_pair",
+    "shift_invert_eigsh",
+]
 
 METHODS = ("auto", "lanczos", "dense")
 _DENSE_MAX = 300
@@ -83,6 +93,81 @@ def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     scale = float(np.median(ratio)) if ratio.size else 1.0
     eps = 1e-3 if np.finfo(A.dtype).bits <= 32 else _SHIFT_EPS
     return -eps * (scale if scale > 0 else 1.0)
+
+
+def ldexp(x: np.ndarray, e: int) -> np.ndarray:
+    """``x * 2**e``, real or complex, dtype kept: exact wherever the result is a normal number."""
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        out = np.empty_like(x)
+        out.real = np.ldexp(x.real, e)
+        out.imag = np.ldexp(x.imag, e)
+        return out
+    return np.ldexp(x, e).astype(x.dtype, copy=False)
+
+
+def binary_exponent(x: float) -> int:
+    """The binary exponent ``e`` with ``x = f 2^e``, ``1/2 <= |f| < 1`` (0 for 0, inf or NaN)."""
+    return int(np.frexp(x)[1]) if x != 0 and np.isfinite(x) else 0
+
+
+class PairScaling(NamedTuple):
+    r"""The powers of two of :func:`normalize_pair`: :math:`A = 2^a A'`, :math:`M = 2^m M'`, ``m`` even.
+
+    :math:`A x = \lambda M x` if and only if :math:`A' x = \lambda' M' x` with
+    :math:`\lambda = 2^{a - m} \lambda'`; :math:`M'`-orthonormal vectors :math:`X'` give the
+    :math:`M`-orthonormal :math:`X = 2^{-m/2} X'`.
+    """
+
+    a_exp: int
+    m_exp: int
+
+    def values(self, lam_n: np.ndarray) -> np.ndarray:
+        """Eigenvalues of ``(A, M)`` from those of the normalised pair."""
+        return ldexp(lam_n, self.a_exp - self.m_exp)
+
+    def vectors(self, X_n: np.ndarray) -> np.ndarray:
+        """``M``-orthonormal eigenvectors from ``M'``-orthonormal ones."""
+        return ldexp(X_n, -self.m_exp // 2)
+
+    def normalized_values(self, lam: np.ndarray) -> np.ndarray:
+        return ldexp(lam, self.m_exp - self.a_exp)
+
+    def normalized_vectors(self, X: np.ndarray) -> np.ndarray:
+        return ldexp(X, self.m_exp // 2)
+
+    def normalized_shift(self, sigma: float) -> float:
+        r"""The shift :math:`\sigma' = 2^{m - a} \sigma` of the normalised pair."""
+        return float(np.ldexp(sigma, self.m_exp - self.a_exp))
+
+
+def normalize_pair(A: sp.spmatrix, M: sp.spmatrix) -> tuple[sp.csr_matrix, sp.csr_matrix, PairScaling]:
+    r"""The pencil divided by powers of two, :math:`A' = 2^{-a} A`, :math:`M' = 2^{-m} M`.
+
+    ``m`` (even) brings :math:`\max |M_{ij}|` into :math:`[1/2, 2)`, ``a`` the median of
+    :math:`|A'_{ii}| / |M'_{ii}|` (the scale of the spectrum, as in :func:`default_shift`)
+    into :math:`[1/2, 1)`; where that median is 0, ``a`` scales :math:`\max |A_{ij}|`.  The
+    scaling is exact in floating point, so the eigenproblem of a mesh scaled by :math:`s`
+    -- :math:`L_c` unchanged, :math:`M_z \propto s^2`, eigenvalues :math:`\propto s^{-2}`
+    -- is the same as at :math:`s = 1` up to a factor in :math:`[1/2, 2]` and the rounding
+    of the operators: no inner product, squared norm or factor of the solver under- or
+    overflows, and its tolerances, floors and shift act on the same numbers at every
+    scale.  Undo it with :class:`PairScaling`.
+    """
+    A, M = sp.csr_matrix(A), sp.csr_matrix(M)
+    m_max = float(np.max(np.abs(M.data))) if M.nnz else 0.0
+    m_exp = 2 * (binary_exponent(m_max) // 2)
+    Mn = M.copy()
+    Mn.data = ldexp(M.data, -m_exp)
+    md = np.abs(Mn.diagonal())
+    ratio = np.abs(A.diagonal())[md > 0] / md[md > 0]
+    scale = float(np.median(ratio)) if ratio.size else 0.0
+    if not (scale > 0 and np.isfinite(scale)):
+        scale = float(np.max(np.abs(A.data))) if A.nnz else 0.0
+    a_exp = binary_exponent(scale)
+    An = A.copy()
+    An.data = ldexp(A.data, -a_exp)
+    return An, Mn, PairScaling(a_exp, m_exp)
 
 
 class _Inner:
