@@ -41,6 +41,16 @@ damping the norm.  Every call measures the ``M_z``-norm after each step and warn
 (:class:`TransportGrowthWarning`) when it grew by more than ``growth_tol`` (5%), with a
 suggested smoothing; see :data:`SUGGESTED_SMOOTHING`.  (Along a field with divergence
 the norm changes legitimately: raise ``growth_tol`` or pass ``None``.)
+
+The suggestion is sized for vector fields (``n = 1``).  For ``n``-direction fields the
+exact solution along the rotation field, ``z(t) = e^{i n t cos(theta)} dPhi (w^n)``, winds
+``n`` times faster, so its Rayleigh quotient ``z^H L_c^(n) z / z^H M_z z`` grows like
+``(n t)^2``: ``K`` heat steps of size ``s`` take about ``s sum_k (n t_k)^2`` of its norm,
+``n^2`` times the vector-field loss, while the growing modes of ``M_z^{-1} D_w^(n)`` grow
+faster with ``n`` as well (the phase errors of the discrete transport scale like
+``n h``).  The heat step therefore cannot both control the growth and keep the norm of
+an ``n >= 2`` field over a full turn on a given mesh as it does for ``n = 1``: the
+suggested smoothing damps such a field visibly; use finer meshes or shorter times.
 """
 
 from __future__ import annotations
