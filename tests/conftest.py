@@ -6,6 +6,11 @@ import os
 # OpenMP threads slow everything down on a shared 2-core machine.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# Under pytest-xdist (the default run: ``-n auto``) each worker is one process per core:
+# one thread each, so that the workers do not oversubscribe the cores.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 if os.environ.get("EDGEVF_HIDE_CHOLMOD"):  # test the pip-only / cholespy / cvxopt back-ends in this process
     import sys
@@ -25,6 +30,9 @@ import pytest
 import torch
 
 import torch_edgevf as ev
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    torch.set_num_threads(1)
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
