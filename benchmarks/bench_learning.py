@@ -179,6 +179,29 @@ def profile_step(name: str, batch, num_classes: int, rows: int = 12) -> str:
     return prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows)
 
 
+def step_times(names, batches, num_classes: int, rounds: int = 3, passes: int = 3) -> dict[str, list[float]]:
+    """Seconds per training step of each model, the models alternated ``rounds`` times.
+
+    Each round trains every model for ``passes`` passes over ``batches`` (forward,
+    backward and Adam step, one mesh per step) after one untimed pass.
+    """
+    out: dict[str, list[float]] = {n: [] for n in names}
+    for _ in range(rounds):
+        for name in names:
+            torch.manual_seed(0)
+            model = MODELS[name](batches[0].features.shape[1], num_classes)
+            opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+            for p in range(passes + 1):
+                if p == 1:
+                    start = time.perf_counter()
+                for b in batches:
+                    opt.zero_grad()
+                    label_smoothing_loss(model(b)[0], int(b.labels)).backward()
+                    opt.step()
+            out[name].append((time.perf_counter() - start) / (passes * len(batches)))
+    return out
+
+
 # --------------------------------------------------------------------------- report
 
 
@@ -231,6 +254,13 @@ def main(argv=None) -> list[dict]:
     )
     p.add_argument("--json", default=None, help="write every run's results here")
     p.add_argument("--profile", action="store_true", help="print a profile of one training step per model")
+    p.add_argument(
+        "--step-time",
+        type=int,
+        default=0,
+        metavar="N",
+        help="only time training steps on every 38th mesh (N meshes), the models alternated, and exit",
+    )
     p.add_argument("--quick", action="store_true", help="4 classes, 8 meshes each, 3 epochs, one seed")
     p.add_argument(
         "--table", nargs="+", metavar="JSON", help="print the table of saved --json results and exit"
@@ -258,7 +288,22 @@ def main(argv=None) -> list[dict]:
     if a.quick:
         dataset = subset(dataset, classes=4, per_class=8)
         a.epochs, a.seeds = min(a.epochs, 3), a.seeds.split(",")[0]
+    if a.step_time:
+        keep = list(range(0, len(dataset["labels"]), 38))[: a.step_time]
+        dataset = {
+            **dataset,
+            "meshes": [dataset["meshes"][i] for i in keep],
+            "labels": dataset["labels"][keep],
+            "split": dataset["split"][keep],
+        }
     batches, precompute_s = precompute(dataset, a.cache)
+    if a.step_time:
+        times = step_times(names, batches, len(dataset["classes"]))
+        base = statistics.mean(times.get("diffusionnet", [float("nan")]))
+        for name, ts in times.items():
+            ms = ", ".join(f"{1e3 * t:.1f}" for t in ts)
+            print(f"{name}: {ms} ms per step; mean vs diffusionnet {statistics.mean(ts) / base:.2f}")
+        return [{"model": n, "seconds_per_step": ts} for n, ts in times.items()]
     print(
         f"operators: {len(batches)} meshes, {precompute_s:.3f} s per mesh computed (nan: all cached)",
         flush=True,

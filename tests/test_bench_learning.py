@@ -65,3 +65,13 @@ def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
     with pytest.raises(SystemExit) as exc:
         bench.main(data + argv)
     assert exc.value.code == 2 and message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, capsys):
+    results = bench.main(["--step-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
+    assert [r["model"] for r in results] == ["edgefieldnet", "diffusionnet"]
+    for r in results:
+        assert len(r["seconds_per_step"]) == 3 and all(0 < t < 60 for t in r["seconds_per_step"])
+    printed = capsys.readouterr().out
+    assert "edgefieldnet:" in printed and "mean vs diffusionnet 1.00" in printed
