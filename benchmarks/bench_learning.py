@@ -126,6 +126,20 @@ def label_smoothing_loss(logits: torch.Tensor, label: int, smoothing: float = 0.
     return -(target * logp).sum(-1).mean()
 
 
+def new_model(name: str, batch, num_classes: int, seed: int):
+    """Model ``name`` initialised from ``seed``, and its Adam optimiser at the recipe's rate."""
+    torch.manual_seed(seed)
+    model = MODELS[name](batch.features.shape[1], num_classes)
+    return model, torch.optim.Adam(model.parameters(), lr=1e-3)
+
+
+def train_step(model, opt, batch) -> None:
+    """One optimiser step on one mesh: label-smoothed cross-entropy, backward, Adam."""
+    opt.zero_grad()
+    label_smoothing_loss(model(batch)[0], int(batch.labels)).backward()
+    opt.step()
+
+
 @torch.no_grad()
 def accuracy(model, batches) -> float:
     model.eval()
@@ -135,18 +149,13 @@ def accuracy(model, batches) -> float:
 
 
 def train(name: str, train_set, test_set, seed: int, epochs: int, num_classes: int) -> dict:
-    torch.manual_seed(seed)
-    model = MODELS[name](train_set[0].features.shape[1], num_classes)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    model, opt = new_model(name, train_set[0], num_classes, seed)
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=50, gamma=0.5)
     order = torch.Generator().manual_seed(seed)
     start = time.perf_counter()
     for _ in range(epochs):
         for i in torch.randperm(len(train_set), generator=order).tolist():
-            b = train_set[i]
-            opt.zero_grad()
-            label_smoothing_loss(model(b)[0], int(b.labels)).backward()
-            opt.step()
+            train_step(model, opt, train_set[i])
         sched.step()
     seconds = time.perf_counter() - start
     return {
@@ -162,20 +171,12 @@ def train(name: str, train_set, test_set, seed: int, epochs: int, num_classes: i
 
 def profile_step(name: str, batch, num_classes: int, rows: int = 12) -> str:
     """The operators that take the time of one training step (torch profiler, self CPU time)."""
-    torch.manual_seed(0)
-    model = MODELS[name](batch.features.shape[1], num_classes)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
-
-    def step():
-        opt.zero_grad()
-        label_smoothing_loss(model(batch)[0], int(batch.labels)).backward()
-        opt.step()
-
+    model, opt = new_model(name, batch, num_classes, 0)
     for _ in range(3):
-        step()
+        train_step(model, opt, batch)
     with torch.profiler.profile() as prof:
         for _ in range(10):
-            step()
+            train_step(model, opt, batch)
     return prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=rows)
 
 
@@ -188,16 +189,12 @@ def step_times(names, batches, num_classes: int, rounds: int = 3, passes: int = 
     out: dict[str, list[float]] = {n: [] for n in names}
     for _ in range(rounds):
         for name in names:
-            torch.manual_seed(0)
-            model = MODELS[name](batches[0].features.shape[1], num_classes)
-            opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+            model, opt = new_model(name, batches[0], num_classes, 0)
             for p in range(passes + 1):
                 if p == 1:
                     start = time.perf_counter()
                 for b in batches:
-                    opt.zero_grad()
-                    label_smoothing_loss(model(b)[0], int(b.labels)).backward()
-                    opt.step()
+                    train_step(model, opt, b)
             out[name].append((time.perf_counter() - start) / (passes * len(batches)))
     return out
 
