@@ -148,7 +148,7 @@ class MeshReport:
         if self.triangulated_faces:
             lines.append(
                 f"  triangulated polygons: {self.file_faces} faces -> {self.loaded_faces} triangles"
-                f" ({len(self.triangulated_faces)} polygons split into fans from their first corner)"
+                f" ({len(self.triangulated_faces)} polygons split into triangles in their planes)"
             )
         elif self.triangulated:
             lines.append(
@@ -265,10 +265,11 @@ def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, M
 
     Nothing is checked, merged or dropped: NaN coordinates, indices out of range,
     duplicates and non-manifold configurations come back as the file holds them (for
-    :func:`~torch_edgevf.mesh.repair.repair` and ``edgevf info``). Polygons are split into
-    fans of triangles from their first corner after their repeated vertex indices are
-    removed (both recorded in the report, with the file's face indices); triangle strips
-    of PLY files are unrolled.
+    :func:`~torch_edgevf.mesh.repair.repair` and ``edgevf info``). The polygons of OFF
+    files are triangulated in their planes by :func:`~torch_edgevf.mesh.repair.triangulate`
+    (convex ones as fans from their first corner, others by ear clipping) after their
+    repeated vertex indices are removed (both recorded in the report, with the file's face
+    indices); triangle strips of PLY files are unrolled.
 
     With ``merge``, vertices with bitwise-identical finite positions are merged as by
     :func:`load_mesh` (vertices with NaN or Inf coordinates are never merged).
@@ -294,7 +295,7 @@ def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, M
     polygons = _read_off(path) if fmt == "off" else None
     if polygons is not None:
         verts, polys = polygons
-        faces = _triangulate_polygons(polys, len(verts), report, path)
+        faces = _triangulate_polygons(polys, verts, report, path)
     else:
         try:
             verts, faces = _read_trimesh(path, report)
@@ -324,11 +325,16 @@ def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, M
     return verts, faces, report
 
 
-def _triangulate_polygons(polys, nv: int, report: MeshReport, path) -> np.ndarray:
+def _triangulate_polygons(polys, verts: np.ndarray, report: MeshReport, path) -> np.ndarray:
     from .mesh.repair import triangulate
 
-    tri, origin, tri_report = triangulate(polys, nv, check=False)
+    tri, origin, tri_report = triangulate(polys, len(verts), check=False, verts=verts)
     report.triangulated_faces = tri_report.triangulated_faces
+    if tri_report.fan_faces:
+        report.notes.append(
+            f"{len(tri_report.fan_faces)} polygons without a plane or not simple in it were split"
+            f" into fans from their first corner: file faces [{_list_some(tri_report.fan_faces)}]"
+        )
     report.repeated_index_faces = tri_report.repeated_index_faces
     report.degenerate_faces = len(polys) - len(np.unique(origin))
     if len(tri) == 0:
