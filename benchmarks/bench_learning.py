@@ -40,12 +40,26 @@ from torch_edgevf.learning.precompute import heat_kernel_signature
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
 MODELS = {
-    "edgefieldnet": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out),
+    # the recommended edge-field network: log-HKS in, mean and deviation out
+    "edgefieldnet": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, log_features=True),
     "diffusionnet": lambda c_in, c_out: models.DiffusionNet(c_in, c_out),
+    # DiffusionNet with the edge-field network's input and readout (a fairness check)
+    "diffusionnet-logstd": lambda c_in, c_out: models.DiffusionNet(
+        c_in, c_out, pool="mean_std", log_features=True
+    ),
     # ablations of the edge-field network
-    "edgefieldnet-scalar": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, vector="none"),
-    "edgefieldnet-vertexvec": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, vector="vertex"),
-    "edgefieldnet-fixedtime": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, learn_times=False),
+    "edgefieldnet-scalar": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, vector="none", log_features=True
+    ),
+    "edgefieldnet-vertexvec": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, vector="vertex", log_features=True
+    ),
+    "edgefieldnet-fixedtime": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, learn_times=False, log_features=True
+    ),
+    "edgefieldnet-meanpool": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, pool="mean", log_features=True
+    ),
 }
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)

@@ -35,11 +35,19 @@ def mesh():
 
 
 NETWORKS = {
-    "edge": lambda: models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,)),
-    "edge-vertex": lambda: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), vector="vertex"
+    "edge": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True
     ),
-    "diffusionnet": lambda: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,)),
+    "edge-meanpool": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, pool="mean"
+    ),
+    "edge-vertex": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex"
+    ),
+    "diffusionnet": lambda head: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,), head=head),
+    "diffusionnet-logstd": lambda head: models.DiffusionNet(
+        8, 5, width=8, num_blocks=2, mlp=(8,), head=head, pool="mean_std", log_features=True
+    ),
 }
 
 
@@ -48,8 +56,7 @@ NETWORKS = {
 def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head):
     v, f = mesh
     torch.manual_seed(0)
-    net = NETWORKS[name]().double().eval()
-    net.head = head
+    net = NETWORKS[name](head).double().eval()
     perm = np.random.default_rng(1).permutation(v.shape[0])
     inverse = np.argsort(perm)
     v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
@@ -82,6 +89,68 @@ def test_edge_field_block_gradcheck(mesh):
     s = block.field_diffusion.raw_times.detach().clone().requires_grad_(True)
     del block.diffusion.raw_times, block.field_diffusion.raw_times
     assert torch.autograd.gradcheck(f_, (x, z, t, s))
+
+
+@pytest.mark.parametrize("log_features", [False, True])
+def test_network_gradcheck_in_the_features(log_features):
+    """Float64 gradcheck through the whole network: log input, blocks, mean-and-deviation readout."""
+    v, f = perturbed_icosphere(1, 0.08, seed=5)
+    batch = _batch(v, f)
+    torch.manual_seed(0)
+    net = models.EdgeFieldNet(8, 3, width=4, vector_width=2, num_blocks=2, mlp=(4,), dropout=0.0)
+    net.log_features = log_features
+    net = net.double()
+    with torch.no_grad():
+        for block in net.blocks:
+            block.diffusion.raw_times.fill_(0.05)
+            block.field_diffusion.raw_times.fill_(0.05)
+    x0 = batch.features.detach().clone().requires_grad_(True)
+
+    def f_(x):
+        batch.features = x
+        return net(batch)
+
+    assert torch.autograd.gradcheck(f_, (x0,))
+
+
+def test_mean_std_readout_separates_what_the_mean_does_not(mesh):
+    """Two meshes whose last features have the same mean but different spreads get
+    different logits from the mean-and-deviation readout and equal ones from the mean."""
+    b = _batch(*mesh)
+    x = torch.randn(b.num_vertices, 4, dtype=torch.float64)
+    w = b.vertex_mass
+    x = x - (w[:, None] * x).sum(0) / w.sum()  # mass-weighted mean 0
+    last = torch.nn.Linear(8, 2).double()
+    a = models._readout(x, last, b, "global", "mean_std")
+    c = models._readout(3 * x, last, b, "global", "mean_std")
+    assert not torch.allclose(a, c)
+    mean_last = torch.nn.Linear(4, 2).double()
+    torch.testing.assert_close(
+        models._readout(x, mean_last, b, "global", "mean"),
+        models._readout(3 * x, mean_last, b, "global", "mean"),
+    )
+
+
+def test_log_features_need_positive_features(mesh):
+    b = _batch(*mesh)
+    b.features = b.features.clone()
+    b.features[7, 2] = -0.5
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1, log_features=True).double()
+    with pytest.raises(ValueError, match="positive features.*vertex 7, channel 2"):
+        net(b)
+    b.features[7, 2] = float("nan")
+    with pytest.raises(ValueError, match="vertex 7, channel 2"):
+        net(b)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [(dict(pool="max"), "pool must be one of"), (dict(log_features=1), "log_features must be True or False")],
+)
+def test_bad_readout_options_are_named(kwargs, match):
+    for cls in (models.EdgeFieldNet, models.DiffusionNet):
+        with pytest.raises(ValueError, match=match):
+            cls(8, 5, **kwargs)
 
 
 def test_dtype_mismatch_is_named_at_the_first_call(mesh):
@@ -147,7 +216,9 @@ def test_edge_field_net_learns_generated_shapes():
     test = data[6::8] + data[7::8]
     train = [b for i, b in enumerate(data) if i % 8 < 6]
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,))
+    net = models.EdgeFieldNet(
+        8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,), log_features=True
+    )
     _train(net, train, epochs=15)
     assert _accuracy(net, test) >= 0.75  # chance: 0.25
     assert _accuracy(net, train) >= 0.75
@@ -164,7 +235,9 @@ def test_edge_field_net_learns_psb_classes():
             v = v.astype(np.float64)
             (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,))
+    net = models.EdgeFieldNet(
+        8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,), log_features=True
+    )
     _train(net, train, epochs=10)
     assert _accuracy(net, test) >= 0.6  # chance: 0.25
 

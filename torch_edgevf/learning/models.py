@@ -14,7 +14,8 @@ gradient and divergence::
             u  = diffuse_Lc(u)                        learned L_c heat diffusion of the fields
             x  = x + MLP(x, xd, pool_v tanh Re(u conj(u A)), tanh div u, tanh curl u)
             z  = z + u
-    logits: linear, then the mass-weighted mean (global), per vertex or per face
+    logits: the mass-weighted mean and standard deviation of x, then linear (global);
+            linear per vertex or per face
 
 The divergence and curl are ``-M_v^{-1} G^* u``, the adjoint of the gradient, so
 information flows both ways between the two streams; the invariant products
@@ -62,9 +63,13 @@ __all__ = [
 
 _HEADS = ("global", "vertex", "face")
 _VECTOR = ("edge", "vertex", "none")
+_POOLS = ("mean", "mean_std")
+#: added to the variance before its square root in ``pool="mean_std"`` (a finite gradient
+#: for constant features)
+_STD_EPS = 1e-6
 
 
-def _check_common(in_channels, out_channels, width, num_blocks, head):
+def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean", log_features=False):
     for name, v in (
         ("in_channels", in_channels),
         ("out_channels", out_channels),
@@ -75,6 +80,10 @@ def _check_common(in_channels, out_channels, width, num_blocks, head):
             raise ValueError(f"{name} must be a positive integer, got {v!r}")
     if head not in _HEADS:
         raise ValueError(f"head must be one of {_HEADS}, got {head!r}")
+    if pool not in _POOLS:
+        raise ValueError(f"pool must be one of {_POOLS}, got {pool!r}")
+    if not isinstance(log_features, bool):
+        raise ValueError(f"log_features must be True or False, got {log_features!r}")
 
 
 def mini_mlp(sizes, dropout: float = 0.5) -> nn.Sequential:
@@ -110,9 +119,35 @@ def _check_dtype(model: nn.Module, batch) -> None:
             )
 
 
-def _readout(x, batch, head: str) -> torch.Tensor:
+def _inputs(model: nn.Module, batch) -> torch.Tensor:
+    """The features, through ``log`` when the model takes logarithms (positive features only)."""
+    f = batch.features
+    if not model.log_features:
+        return f
+    bad = ~(f > 0)
+    if bad.any():
+        v, c = (int(i) for i in bad.nonzero()[0])
+        raise ValueError(
+            f"log_features=True needs positive features (such as heat kernel signatures), "
+            f"got {float(f[v, c])} at vertex {v}, channel {c}"
+        )
+    return torch.log(f)
+
+
+def _readout(x, last: nn.Linear, batch, head: str, pool: str) -> torch.Tensor:
+    """``last`` applied per vertex, then pooled (``head="global"``), or per vertex / face.
+
+    ``pool="mean_std"``: the mass-weighted mean and standard deviation of ``x`` over each
+    mesh, concatenated, then ``last`` (which takes ``2 C`` inputs).
+    """
     if head == "global":
-        return pool_global(x, batch.vertex_mass.to(x.dtype), batch.vertex_batch, batch.num_meshes)
+        w = batch.vertex_mass.to(x.dtype)
+        if pool == "mean":
+            return pool_global(last(x), w, batch.vertex_batch, batch.num_meshes)
+        mean = pool_global(x, w, batch.vertex_batch, batch.num_meshes)
+        var = pool_global((x - mean[batch.vertex_batch]) ** 2, w, batch.vertex_batch, batch.num_meshes)
+        return last(torch.cat([mean, (var + _STD_EPS).sqrt()], dim=1))
+    x = last(x)
     if head == "vertex":
         return x
     return x[batch.faces].mean(1)
@@ -269,6 +304,14 @@ class EdgeFieldNet(nn.Module):
     head : {"global", "vertex", "face"}
     vector : {"edge", "vertex", "none"}, see :class:`EdgeFieldBlock`
     learn_times : bool
+    pool : {"mean_std", "mean"}
+        Readout of ``head="global"``: the mass-weighted mean and standard deviation of
+        the last block's scalars, then a linear layer (default); or a linear layer per
+        vertex, then the mass-weighted mean (DiffusionNet's readout).
+    log_features : bool
+        Take the logarithm of the input features first (for positive features whose
+        scales span orders of magnitude, such as heat kernel signatures; others raise
+        ``ValueError``).
 
     Forward
     -------
@@ -287,25 +330,28 @@ class EdgeFieldNet(nn.Module):
         head: str = "global",
         vector: str = "edge",
         learn_times: bool = True,
+        pool: str = "mean_std",
+        log_features: bool = False,
     ):
         super().__init__()
-        _check_common(in_channels, out_channels, width, num_blocks, head)
+        _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
         self.in_channels, self.head, self.vector = in_channels, head, vector
+        self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(
             EdgeFieldBlock(width, vector_width, mlp, dropout, vector, learn_times, carry=i > 0)
             for i in range(num_blocks)
         )
-        self.last = nn.Linear(width, out_channels)
+        self.last = nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
         _check_batch(batch, self.in_channels, needs)
         _check_dtype(self, batch)
-        x, z = self.first(batch.features), None
+        x, z = self.first(_inputs(self, batch)), None
         for block in self.blocks:
             x, z = block(x, z, batch)
-        return _readout(self.last(x), batch, self.head)
+        return _readout(x, self.last, batch, self.head, self.pool)
 
 
 # --------------------------------------------------------------------------- DiffusionNet
@@ -332,7 +378,9 @@ class DiffusionNet(nn.Module):
 
     Needs ``batch.vertex_gradient`` (``compute_operators(..., vertex_gradient=True)``) and
     the eigenpairs of the cotangent Laplacian. Defaults are those of the paper's
-    classification experiments: width 64, 4 blocks, MLP (64, 64), dropout 0.5.
+    classification experiments: width 64, 4 blocks, MLP (64, 64), dropout 0.5, the
+    mean readout, raw features. ``pool`` and ``log_features`` are those of
+    :class:`EdgeFieldNet`, for comparisons with the same readout and inputs.
     """
 
     def __init__(
@@ -344,21 +392,24 @@ class DiffusionNet(nn.Module):
         mlp=(64, 64),
         dropout: float = 0.5,
         head: str = "global",
+        pool: str = "mean",
+        log_features: bool = False,
     ):
         super().__init__()
-        _check_common(in_channels, out_channels, width, num_blocks, head)
+        _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
         self.in_channels, self.head = in_channels, head
+        self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
-        self.last = nn.Linear(width, out_channels)
+        self.last = nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
         _check_dtype(self, batch)
-        x = self.first(batch.features)
+        x = self.first(_inputs(self, batch))
         for block in self.blocks:
             x = block(x, batch)
-        return _readout(self.last(x), batch, self.head)
+        return _readout(x, self.last, batch, self.head, self.pool)
 
 
 #: the earlier name of :class:`DiffusionNet`

@@ -1027,7 +1027,7 @@ def _split_polygons(block: np.ndarray, v: np.ndarray | None) -> tuple[np.ndarray
     tri = block[:, _fan(k)]
     if v is None:
         return tri, np.zeros(0, np.int64)
-    placed = ((block >= 0) & (block < len(v))).all(1)
+    placed = np.asarray(((block >= 0) & (block < len(v))).all(1))
     placed[placed] = np.isfinite(v[block[placed]]).all((1, 2))
     rows = np.flatnonzero(placed)
     if not len(rows):
