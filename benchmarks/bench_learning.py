@@ -213,6 +213,43 @@ def step_times(names, batches, num_classes: int, rounds: int = 3, passes: int = 
     return out
 
 
+def precompute_times(dataset: dict, rounds: int = 3) -> dict[str, list[float]]:
+    """Seconds per mesh of the operator precompute: DiffusionNet's against this library's.
+
+    ``diffusionnet``: the steps of DiffusionNet's ``compute_operators`` (robust_laplacian's
+    Laplacian, ARPACK ``eigsh`` with ``k = 128``, the least-squares vertex gradient), as
+    ``bench_peers.py`` rebuilds them; ``edgefieldnet``: :func:`compute_operators` with the
+    options of this benchmark (``k = 128`` vertex and 32 edge eigenpairs, ``G``, ``L_c``,
+    the vertex gradient). Alternated ``rounds`` times over the meshes; nothing cached.
+    """
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_peers
+
+    from torch_edgevf.learning.precompute import compute_operators
+
+    if bench_peers._peer("robust_laplacian") is None:
+        raise SystemExit("--precompute-time needs robust_laplacian (benchmarks/requirements-peers.txt)")
+    meshes = []
+    for v, f in dataset["meshes"]:
+        if len(find_degenerate_faces(v, f)):
+            v, f = repair_degenerate_faces(v, f)[:2]
+        meshes.append((np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)))
+    steps = {
+        "diffusionnet": lambda v, f: bench_peers.diffusionnet_reference(v, f),
+        "edgefieldnet": lambda v, f: compute_operators(v, f, **OPERATOR_OPTIONS),
+    }
+    out: dict[str, list[float]] = {n: [] for n in steps}
+    for name, fn in steps.items():  # one untimed call each
+        fn(*meshes[0])
+    for _ in range(rounds):
+        for name, fn in steps.items():
+            start = time.perf_counter()
+            for v, f in meshes:
+                fn(v, f)
+            out[name].append((time.perf_counter() - start) / len(meshes))
+    return out
+
+
 # --------------------------------------------------------------------------- report
 
 
@@ -272,6 +309,14 @@ def main(argv=None) -> list[dict]:
         metavar="N",
         help="only time training steps on every 38th mesh (N meshes), the models alternated, and exit",
     )
+    p.add_argument(
+        "--precompute-time",
+        type=int,
+        default=0,
+        metavar="N",
+        help="only time the operator precompute per mesh on every 38th mesh (N meshes), "
+        "DiffusionNet's against this library's, alternated, and exit",
+    )
     p.add_argument("--quick", action="store_true", help="4 classes, 8 meshes each, 3 epochs, one seed")
     p.add_argument(
         "--table", nargs="+", metavar="JSON", help="print the table of saved --json results and exit"
@@ -299,14 +344,21 @@ def main(argv=None) -> list[dict]:
     if a.quick:
         dataset = subset(dataset, classes=4, per_class=8)
         a.epochs, a.seeds = min(a.epochs, 3), a.seeds.split(",")[0]
-    if a.step_time:
-        keep = list(range(0, len(dataset["labels"]), 38))[: a.step_time]
+    if a.step_time or a.precompute_time:
+        keep = list(range(0, len(dataset["labels"]), 38))[: a.step_time or a.precompute_time]
         dataset = {
             **dataset,
             "meshes": [dataset["meshes"][i] for i in keep],
             "labels": dataset["labels"][keep],
             "split": dataset["split"][keep],
         }
+    if a.precompute_time:
+        times = precompute_times(dataset)
+        base = statistics.mean(times["diffusionnet"])
+        for name, ts in times.items():
+            ms = ", ".join(f"{1e3 * t:.0f}" for t in ts)
+            print(f"{name}: {ms} ms per mesh; mean vs diffusionnet {statistics.mean(ts) / base:.2f}")
+        return [{"model": n, "seconds_per_mesh": ts} for n, ts in times.items()]
     batches, precompute_s = precompute(dataset, a.cache)
     if a.step_time:
         times = step_times(names, batches, len(dataset["classes"]))

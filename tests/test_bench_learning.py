@@ -75,3 +75,15 @@ def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, 
         assert len(r["seconds_per_step"]) == 3 and all(0 < t < 60 for t in r["seconds_per_step"])
     printed = capsys.readouterr().out
     assert "edgefieldnet:" in printed and "mean vs diffusionnet 1.00" in printed
+
+
+@pytest.mark.slow
+def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, capsys):
+    pytest.importorskip("robust_laplacian")
+    results = bench.main(["--precompute-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
+    assert [r["model"] for r in results] == ["diffusionnet", "edgefieldnet"]
+    for r in results:
+        assert len(r["seconds_per_mesh"]) == 3 and all(0 < t < 60 for t in r["seconds_per_mesh"])
+    assert not (tmp_path / "cache").exists()  # nothing cached: every call computes
+    printed = capsys.readouterr().out
+    assert "edgefieldnet:" in printed and "mean vs diffusionnet" in printed
