@@ -1,10 +1,11 @@
 """Reading and writing triangle meshes and edge-based tangent fields.
 
 Meshes
-    :func:`load_mesh` reads OBJ, PLY, OFF and STL through trimesh with
-    ``process=False`` (trimesh neither merges, reorders, drops faces nor fixes
-    winding), then does its own documented clean-up and records every change in a
-    :class:`MeshReport`:
+    :func:`load_mesh` reads OBJ, PLY and STL through trimesh with ``process=False``
+    (trimesh neither merges, reorders, drops faces nor fixes winding) and OFF itself;
+    OBJ and PLY files with faces of more than three corners are read without
+    trimesh's triangulation (see below). It then does its own documented clean-up
+    and records every change in a :class:`MeshReport`:
 
     1. a scene of several geometries is concatenated (in scene-graph order);
     2. vertices with bitwise-identical positions are merged (``merge=True``);
@@ -18,8 +19,11 @@ Meshes
     carry the same coordinates, while a tolerance could fuse distinct vertices.
     Positions are never rounded or moved; kept vertices stay in first-occurrence
     order (for the meshes tested this is the order of the file's ``v`` lines).
-    Polygons are triangulated by trimesh; the report shows the face counts of the
-    file next to the triangle counts.
+    Polygons (faces of more than three corners, of OFF, OBJ and PLY files) are
+    triangulated in their planes by :func:`~torch_edgevf.mesh.repair.triangulate`
+    from the file's positions and index lists (trimesh would split them into fans
+    from their first corner, which is wrong for concave ones); the report names them
+    and shows the face counts of the file next to the triangle counts.
 
     :func:`save_mesh` writes OBJ, OFF (``%.17g`` text) and PLY (binary float64)
     itself, because trimesh writes OBJ and OFF with a fixed number of decimals and
@@ -85,7 +89,8 @@ class MeshReport:
 
     ``file_vertices`` / ``file_faces`` are the record counts stated by the file
     (``None`` where the format does not state them, e.g. STL); ``loaded_*`` are
-    what trimesh returned; the other counts are the changes made afterwards.
+    what the reader returned (trimesh, or the library's own for OFF files and OBJ and
+    PLY files with polygons); the other counts are the changes made afterwards.
     """
 
     path: str
@@ -265,11 +270,13 @@ def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, M
 
     Nothing is checked, merged or dropped: NaN coordinates, indices out of range,
     duplicates and non-manifold configurations come back as the file holds them (for
-    :func:`~torch_edgevf.mesh.repair.repair` and ``edgevf info``). The polygons of OFF
-    files are triangulated in their planes by :func:`~torch_edgevf.mesh.repair.triangulate`
-    (convex ones as fans from their first corner, others by ear clipping) after their
-    repeated vertex indices are removed (both recorded in the report, with the file's face
-    indices); triangle strips of PLY files are unrolled.
+    :func:`~torch_edgevf.mesh.repair.repair` and ``edgevf info``). The polygons of OFF,
+    OBJ and PLY files are triangulated in their planes by
+    :func:`~torch_edgevf.mesh.repair.triangulate` (convex ones as fans from their first
+    corner, others by ear clipping) after their repeated vertex indices are removed (both
+    recorded in the report, with the file's face indices); OBJ and PLY files whose faces
+    are all triangles are read by trimesh as they are. Triangle strips of PLY files are
+    unrolled.
 
     With ``merge``, vertices with bitwise-identical finite positions are merged as by
     :func:`load_mesh` (vertices with NaN or Inf coordinates are never merged).
@@ -292,19 +299,27 @@ def read_triangles(path, merge: bool = False) -> tuple[np.ndarray, np.ndarray, M
     report = MeshReport(path=str(path), format=fmt)
     if fmt == "stl":
         _check_stl(path)
-    polygons = _read_off(path) if fmt == "off" else None
+    polygons = _read_off(path) if fmt == "off" else _read_obj_polygons(path) if fmt == "obj" else None
+    if polygons is None:
+        try:
+            loaded = _load_trimesh(path, report)
+            polygons = _ply_polygons(loaded, path) if fmt == "ply" else None
+            if polygons is None:
+                verts, faces = _read_trimesh(path, report, loaded)
+        except ValueError:
+            if fmt != "ply":
+                raise
+            strips = _read_ply_strips(path)
+            if strips is not None:
+                verts, faces = strips
+                report.notes.append(f"unrolled triangle strips into {len(faces)} triangles")
+            else:
+                polygons = _read_ply_binary_polygons(path)
+                if polygons is None:
+                    raise
     if polygons is not None:
         verts, polys = polygons
         faces = _triangulate_polygons(polys, verts, report, path)
-    else:
-        try:
-            verts, faces = _read_trimesh(path, report)
-        except ValueError:
-            strips = _read_ply_strips(path) if fmt == "ply" else None
-            if strips is None:
-                raise
-            verts, faces = strips
-            report.notes.append(f"unrolled triangle strips into {len(faces)} triangles")
     report.file_vertices, report.file_faces = _stated_counts(path, fmt)
     report.loaded_vertices, report.loaded_faces = len(verts), len(faces)
     finite = np.isfinite(verts).all(1)
@@ -405,6 +420,163 @@ def _read_off(path: Path):
     if nf == 0:
         raise ValueError(f"cannot read mesh {path}: it is a point cloud ({nv} points, no faces)")
     return verts, polys
+
+
+# An ``f`` record with at least four corners, and a line continued by a trailing backslash.
+_OBJ_POLYGON = re.compile(rb"(?m)^[ \t]*f[ \t]+(?:[^\s#\\]+[ \t]+){3}[^\s#\\]")
+_OBJ_CONTINUED = re.compile(rb"\\[ \t]*\r?\n")
+
+
+def _read_obj_polygons(path: Path):
+    """Positions and polygons of an OBJ file with a face of more than three corners, else None.
+
+    trimesh splits such faces into fans from their first corner (wrong for a concave polygon)
+    and, in files with texture coordinates or normals, gives every triangle its own corners,
+    so the polygons cannot be recovered from what it returns; they are parsed here instead.
+    Only ``v`` records (their first three numbers) and ``f`` records count. A corner of an
+    ``f`` record is ``i``, ``i/t``, ``i/t/n`` or ``i//n``, with ``i`` counted from 1 or, when
+    negative, back from the last ``v`` record before it; ``#`` starts a comment and a
+    backslash at the end of a line continues the record on the next one. Objects and groups
+    share the file's vertex list, so all faces are read in file order. Index ``0`` (not a
+    valid OBJ index) becomes ``-1``, which :func:`load_mesh` rejects as out of range.
+    """
+    data = path.read_bytes()
+    if not (_OBJ_POLYGON.search(data) or _OBJ_CONTINUED.search(data)):
+        return None
+    text = _OBJ_CONTINUED.sub(b" ", data).decode("utf-8", errors="replace")
+    verts: list[list[float]] = []
+    polys: list[np.ndarray] = []
+    for line in text.splitlines():
+        words = line.split("#", 1)[0].split()
+        if not words or words[0] not in ("v", "f"):
+            continue
+        try:
+            if words[0] == "v":
+                if len(words) < 4:
+                    raise ValueError("fewer than three coordinates")
+                verts.append([float(w) for w in words[1:4]])
+            else:
+                n = len(verts)
+                idx = [int(w.split("/", 1)[0]) for w in words[1:]]
+                polys.append(np.array([i - 1 if i > 0 else n + i if i < 0 else -1 for i in idx], np.int64))
+        except ValueError as err:
+            raise ValueError(
+                f"cannot read mesh {path}: not a valid OBJ file (record {line.strip()!r}: {err})"
+            ) from err
+    if max((len(p) for p in polys), default=0) <= 3:
+        return None  # no polygon after all (a comment or a continued triangle): trimesh reads it
+    return np.array(verts, dtype=np.float64).reshape(-1, 3), polys
+
+
+def _ply_polygons(loaded, path: Path):
+    """Positions and polygons of a PLY file that trimesh read, if a face has more than three corners.
+
+    trimesh splits such faces into fans from their first corner, but keeps the parsed
+    elements in ``metadata["_ply_raw"]``: the ``vertex`` element's ``x, y, z`` and the
+    ``face`` element's ``vertex_indices`` (or ``vertex_index``) lists are taken from there.
+    Its binary reader takes every list to be as long as the first; when the stored lengths
+    say otherwise (the sizes happened to add up) the file is read again by
+    :func:`_read_ply_binary_polygons`. None for a file of triangles (trimesh's result stands).
+    """
+    raw = getattr(loaded, "metadata", {}).get("_ply_raw")
+    if not isinstance(raw, dict) or "vertex" not in raw or "face" not in raw:
+        return None
+    data = raw["face"].get("data")
+    names = (
+        list(data)
+        if isinstance(data, dict)
+        else list(getattr(getattr(data, "dtype", None), "names", None) or [])
+    )
+    name = next(
+        (n for n in ("vertex_indices", "vertex_index") if n in names), names[0] if len(names) == 1 else None
+    )
+    if name is None:
+        return None
+    lists = data[name]
+    if isinstance(lists, np.ndarray) and lists.dtype.names == ("f0", "f1"):  # binary: (count, indices)
+        counts, lists = lists["f0"], lists["f1"]
+        if lists.ndim != 2 or (counts != lists.shape[1]).any():
+            return _read_ply_binary_polygons(path)
+    polys: np.ndarray | list[np.ndarray]
+    if isinstance(lists, np.ndarray) and lists.dtype != object:
+        if lists.ndim != 2 or lists.shape[1] <= 3:
+            return None
+        polys = lists.astype(np.int64)
+    else:
+        polys = [np.asarray(p, dtype=np.int64).reshape(-1) for p in lists]
+        if max((len(p) for p in polys), default=0) <= 3:
+            return None
+    vdata = raw["vertex"]["data"]
+    verts = np.column_stack([np.asarray(vdata[c], dtype=np.float64).reshape(-1) for c in "xyz"])
+    return verts, polys
+
+
+def _read_ply_binary_polygons(path: Path):
+    """Positions and polygons of a binary PLY file, read row by row, or None.
+
+    trimesh's binary reader takes every list of an element to be as long as the first, so it
+    rejects (or misreads) a file that mixes, say, triangles and quads; here the rows of
+    elements with list properties are read one at a time. Elements after ``vertex`` and
+    ``face`` are not read. None for an ASCII file, a file without ``vertex`` (with ``x, y,
+    z``) or ``face`` elements, or one shorter than its header says.
+    """
+    from trimesh.exchange import ply
+
+    try:
+        with open(path, "rb") as fh:
+            elements, is_ascii, _ = ply._parse_header(fh)
+            body = fh.read()
+    except (ValueError, KeyError, IndexError, TypeError, UnicodeDecodeError):
+        return None
+    if is_ascii or "vertex" not in elements or "face" not in elements:
+        return None
+    verts = polys = None
+    pos = 0
+    try:
+        for name, element in elements.items():
+            # trimesh's header types: "<f4" for a scalar, "<u1, ($LIST,)<i4" for a list
+            props = [
+                (p, [np.dtype(t) for t in dt.split(", ($LIST,)")]) for p, dt in element["properties"].items()
+            ]
+            n = int(element["length"])
+            if all(len(t) == 1 for _, t in props):
+                dtype = np.dtype([(p, t[0]) for p, t in props])
+                rows = np.frombuffer(body, dtype, count=n, offset=pos)
+                pos += n * dtype.itemsize
+                if name == "vertex":
+                    verts = np.column_stack([rows[c].astype(np.float64) for c in "xyz"])
+            elif name == "vertex":
+                return None
+            else:
+                lists = [p for p, t in props if len(t) == 2]
+                want = next((p for p in ("vertex_indices", "vertex_index") if p in lists), lists[0])
+                found = []
+                for _ in range(n):
+                    for p, t in props:
+                        if len(t) == 1:
+                            pos += t[0].itemsize
+                            continue
+                        count, item = t
+                        k = int.from_bytes(
+                            body[pos : pos + count.itemsize],
+                            "big" if count.str[0] == ">" else "little",
+                            signed=count.kind == "i",
+                        )
+                        pos += count.itemsize
+                        if k < 0 or pos + k * item.itemsize > len(body):
+                            return None
+                        if p == want and name == "face":
+                            found.append(np.frombuffer(body, item, count=k, offset=pos).astype(np.int64))
+                        pos += k * item.itemsize
+                if pos > len(body):
+                    return None
+                if name == "face":
+                    polys = found
+            if verts is not None and polys is not None:
+                return verts, polys
+    except (ValueError, KeyError, TypeError):
+        return None
+    return None
 
 
 def _whole_records(words: list[str]) -> bool:
@@ -520,12 +692,12 @@ def _write_text(path: Path, header: str, blocks) -> None:
             np.savetxt(fh, arr, fmt=fmt)
 
 
-def _read_trimesh(path: Path, report: MeshReport) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (float64) and triangles (int64) of every mesh in the file, unprocessed."""
+def _load_trimesh(path: Path, report: MeshReport):
+    """What ``trimesh.load`` returns for the file, unprocessed; its errors as ``ValueError``."""
     import trimesh
 
     try:
-        loaded = trimesh.load(path, process=False)
+        return trimesh.load(path, process=False)
     except (
         ValueError,
         IndexError,
@@ -541,6 +713,13 @@ def _read_trimesh(path: Path, report: MeshReport) -> tuple[np.ndarray, np.ndarra
             f"({type(err).__name__}: {err})"
         ) from err
 
+
+def _read_trimesh(path: Path, report: MeshReport, loaded=None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (float64) and triangles (int64) of every mesh in the file (or ``loaded``), unprocessed."""
+    import trimesh
+
+    if loaded is None:
+        loaded = _load_trimesh(path, report)
     parts: list[tuple[trimesh.Trimesh, np.ndarray | None]]
     if isinstance(loaded, trimesh.Trimesh):
         parts = [(loaded, None)]
