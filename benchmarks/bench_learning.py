@@ -60,6 +60,8 @@ MODELS = {
     "edgefieldnet-meanpool": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, pool="mean", log_features=True
     ),
+    # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
+    "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
