@@ -488,7 +488,25 @@ def test_block_grows_on_multiple_eigenvalues_without_symmetry(caplog):
         lam = eigsh(big.to_sparse(), m, 9, method="lanczos").values
     ref = eigsh(big.to_sparse(), m, 9, method="dense").values
     torch.testing.assert_close(lam, ref, rtol=1e-10, atol=1e-12)
-    assert any("block size 2 -> 6" in r.getMessage() for r in caplog.records)
+    assert any("block size 2 -> 4" in r.getMessage() for r in caplog.records)
+
+
+def test_block_doubles_twice_on_fivefold_eigenvalues(caplog):
+    """Five identical disconnected grids: every eigenvalue has multiplicity 5; the block
+    fills at 2 and again at 4, and ends at 6."""
+    import logging
+
+    p = grid_laplacian(6, 7, torch.complex128, shift=0.1)
+    A = p.A.to_dense()
+    big = torch.block_diag(*[A] * 5)
+    m = p.m.repeat(5)
+    with caplog.at_level(logging.DEBUG, logger="torch_edgevf.linalg"):
+        lam = eigsh(big.to_sparse(), m, 10, method="lanczos").values
+    ref = eigsh(big.to_sparse(), m, 10, method="dense").values
+    torch.testing.assert_close(lam, ref, rtol=1e-10, atol=1e-12)
+    messages = [r.getMessage() for r in caplog.records]
+    assert any("block size 2 -> 4" in s for s in messages)
+    assert any("block size 4 -> 6" in s for s in messages)
 
 
 def test_no_block_growth_on_a_simple_spectrum(caplog):

@@ -297,8 +297,8 @@ def eigsh(
         24 for ``k = 1``), start vector(s).
     block_size : int, optional
         Fixed Lanczos block size.  Eigenvalues of multiplicity up to the block size are
-        all found.  Default: adaptive, ``min(k, 2)`` growing to ``min(k, 6)`` as soon as
-        two (a block's worth of) converged Ritz values coincide -- the trace that a block
+        all found.  Default: adaptive, ``min(k, 2)`` doubling, up to ``min(k, 6)``, each
+        time a block's worth of converged Ritz values coincide -- the trace that a block
         Lanczos leaves of a higher multiplicity -- so that the clusters of up to 5 or 6
         equal eigenvalues of symmetric meshes (icospheres) are found, while meshes
         without multiple eigenvalues keep the cheaper small block.  ``k = 1`` (without

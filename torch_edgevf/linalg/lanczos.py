@@ -21,8 +21,9 @@ Convergence is tested on a schedule (:class:`_TestSchedule`): as often as the de
 eigendecomposition of the projected matrix is cheap against a step, and never later than
 half the steps that the observed rate of convergence predicts are left; a residual is
 accepted below ``tol |theta|``, or at the rounding floor ``10 eps ||T||`` for ``k > 1``.
-The block size starts at 2 and grows to 6 only when the Ritz values show a cluster of
-equal values (a multiple eigenvalue: symmetric meshes).  ``k = 1`` has its own path,
+The block size starts at 2 and doubles, up to 6, each time the Ritz values show a
+cluster of as many equal values as the block has columns (a multiple eigenvalue:
+symmetric meshes).  ``k = 1`` has its own path,
 :func:`_smallest_pair`: inverse iteration with the factor, accelerated by Rayleigh-Ritz
 on its iterates, with selective instead of full reorthogonalization.  Small problems, and
 those where ``k`` is a large part of ``N``, are solved dense (:func:`dense_is_faster`).
@@ -343,10 +344,14 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
     step's rounding, about ``1e-15``).
 
     The block size bounds the multiplicity of the eigenvalues that are found for sure.
-    With ``max_block > block`` the block grows to ``max_block`` as soon as the converged
-    Ritz values show a cluster of ``block`` equal values (a possibly larger multiplicity,
-    see :func:`_largest_cluster`): a thick restart whose new block is the residual block
-    completed with random directions.  Convergence is then accepted only after at least
+    With ``max_block > block`` the block doubles (up to ``max_block``) whenever the
+    converged Ritz values show a cluster of as many equal values as the block has columns
+    (a possibly larger multiplicity, see :func:`_largest_cluster`): a thick restart whose
+    new block is the residual block completed with random directions.  Doubling rather
+    than jumping to ``max_block``: a larger block lowers the Krylov degree reached per
+    solve, so multiplicities of 2 and 3 (rotational and cube symmetries) converge in
+    fewer solves with a block of 4 than of 6, and a block of 4 that fills with equal
+    values (a multiplicity of 4 or more) grows again.  Convergence is then accepted only after at least
     as many further solves as before the growth, so that the missing copies have time to
     appear.  Returns Ritz values ``theta`` (k,) descending, Ritz vectors (n, k), and the
     number of columns ``op`` was applied to.
@@ -419,7 +424,7 @@ def _lanczos(op, inner: _Inner, n, k, *, block, ncv, tol, maxiter, v0, keep=None
             H[:cols, cols - b : cols] = C
             pending = False
             theta, S, coupling = _ritz(H, cols, b, R)
-        nb = max_block if grow else b
+        nb = min(max_block, 2 * b) if grow else b
         q = min(max(p, k), m - nb, cols)
         _rotate(V, cols, S, q)
         V[:, q : q + b] = Q  # (numpy buffers the copy if Q overlaps, as a view of V)
