@@ -119,6 +119,11 @@ def _check_dtype(model: nn.Module, batch) -> None:
             )
 
 
+def _last_layer(width: int, out_channels: int, head: str, pool: str) -> nn.Linear:
+    """The output layer: ``2 width`` inputs for the mean-and-deviation readout, else ``width``."""
+    return nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
+
+
 def _inputs(model: nn.Module, batch) -> torch.Tensor:
     """The features, through ``log`` when the model takes logarithms (positive features only)."""
     f = batch.features
@@ -342,7 +347,7 @@ class EdgeFieldNet(nn.Module):
             EdgeFieldBlock(width, vector_width, mlp, dropout, vector, learn_times, carry=i > 0)
             for i in range(num_blocks)
         )
-        self.last = nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
+        self.last = _last_layer(width, out_channels, head, pool)
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
@@ -401,7 +406,7 @@ class DiffusionNet(nn.Module):
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
-        self.last = nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
+        self.last = _last_layer(width, out_channels, head, pool)
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
