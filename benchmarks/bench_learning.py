@@ -95,13 +95,19 @@ def subset(dataset: dict, classes: int, per_class: int) -> dict:
     return out
 
 
+def without_degenerate_faces(v, f):
+    """The mesh with each zero-area face collapsed (one PSB mesh has one), else as it is."""
+    if len(find_degenerate_faces(v, f)):
+        v, f = repair_degenerate_faces(v, f)[:2]
+    return v, f
+
+
 def precompute(dataset: dict, cache_dir) -> tuple[list[MeshBatch], float]:
     """One single-mesh batch per mesh (operators cached); returns the mean seconds per mesh computed."""
     cache = OperatorCache(cache_dir)
     batches, computed = [], []
     for (v, f), label in zip(dataset["meshes"], dataset["labels"]):
-        if len(find_degenerate_faces(v, f)):
-            v, f = repair_degenerate_faces(v, f)[:2]
+        v, f = without_degenerate_faces(v, f)
         key = cache.key(v, f, **OPERATOR_OPTIONS)
         t = time.perf_counter()
         ops = cache.load(key)
@@ -233,8 +239,7 @@ def precompute_times(dataset: dict, rounds: int = 3) -> dict[str, list[float]]:
         raise SystemExit("--precompute-time needs robust_laplacian (benchmarks/requirements-peers.txt)")
     meshes = []
     for v, f in dataset["meshes"]:
-        if len(find_degenerate_faces(v, f)):
-            v, f = repair_degenerate_faces(v, f)[:2]
+        v, f = without_degenerate_faces(v, f)
         meshes.append((np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)))
     steps = {
         "diffusionnet": lambda v, f: bench_peers.diffusionnet_reference(v, f),
