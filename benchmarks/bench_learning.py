@@ -299,6 +299,12 @@ def main(argv=None) -> list[dict]:
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--epochs", type=int, default=60)
     p.add_argument("--folds", type=int, default=0, help="stratified K-fold cross-validation over all meshes")
+    p.add_argument(
+        "--only-folds",
+        default=None,
+        metavar="K,...",
+        help="with --folds: run only these folds (0-based), to spread one cross-validation over processes",
+    )
     p.add_argument("--split", default=None, help=".npy of 0 (train) / 1 (test) flags, one per mesh")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
@@ -341,6 +347,14 @@ def main(argv=None) -> list[dict]:
         p.error("--folds must be 0 (off) or at least 2")
     if a.folds and a.split:
         p.error("--folds and --split exclude each other")
+    only_folds = None
+    if a.only_folds is not None:
+        try:
+            only_folds = {int(k) for k in a.only_folds.split(",")}
+        except ValueError:
+            p.error(f"--only-folds takes comma-separated fold numbers, got {a.only_folds!r}")
+        if not a.folds or not only_folds <= set(range(a.folds)):
+            p.error(f"--only-folds needs --folds K and numbers in 0..K-1, got {a.only_folds!r}")
     try:
         a.data = str(psb_path(a.data))
     except ValueError as e:
@@ -379,7 +393,10 @@ def main(argv=None) -> list[dict]:
         flush=True,
     )
     results = []
-    for split_name, test_mask in splits(dataset, a.folds, a.split):
+    evaluations = splits(dataset, a.folds, a.split)
+    if only_folds is not None:
+        evaluations = [evaluations[k] for k in sorted(only_folds)]
+    for split_name, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, test_mask) if not t]
         test_set = [b for b, t in zip(batches, test_mask) if t]
         for seed in [int(s) for s in a.seeds.split(",")]:

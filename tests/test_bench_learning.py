@@ -57,7 +57,14 @@ def test_split_file_is_checked(bench, tmp_path):
 
 @pytest.mark.parametrize(
     "argv, message",
-    [(["--models", "resnet"], "unknown models"), (["--folds", "1"], "--folds"), ([], "TORCH_EDGEVF_PSB")],
+    [
+        (["--models", "resnet"], "unknown models"),
+        (["--folds", "1"], "--folds"),
+        (["--only-folds", "0"], "--only-folds needs --folds"),
+        (["--folds", "5", "--only-folds", "5"], "0..K-1"),
+        (["--folds", "5", "--only-folds", "a"], "comma-separated"),
+        ([], "TORCH_EDGEVF_PSB"),
+    ],
 )
 def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
     monkeypatch.delenv("TORCH_EDGEVF_PSB", raising=False)
@@ -87,3 +94,10 @@ def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, 
     assert not (tmp_path / "cache").exists()  # nothing cached: every call computes
     printed = capsys.readouterr().out
     assert "edgefieldnet:" in printed and "mean vs diffusionnet" in printed
+
+
+@pytest.mark.slow
+def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
+    argv = ["--quick", "--models", "edgefieldnet-scalar", "--folds", "4", "--only-folds", "3,1"]
+    results = bench.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
+    assert [r["split"] for r in results] == ["fold1", "fold3"]
