@@ -24,6 +24,26 @@ def list_some(items) -> str:
     return shown
 
 
+def faces_out_of_range(faces, num_vertices: int) -> list[int]:
+    """Rows of ``faces`` (an ``(F, k)`` array or tensor) with a vertex index outside ``[0, num_vertices)``."""
+    if isinstance(faces, torch.Tensor):
+        return torch.nonzero(((faces < 0) | (faces >= num_vertices)).any(dim=1)).flatten().tolist()
+    faces = np.asarray(faces)
+    return np.flatnonzero(((faces < 0) | (faces >= num_vertices)).any(axis=1)).tolist()
+
+
+def face_range_message(bad, num_vertices: int) -> str:
+    """The message for the faces ``bad`` (indices) that have vertex indices out of range."""
+    return f"faces have vertex indices outside [0, {num_vertices}) at faces [{list_some(bad)}]"
+
+
+def check_face_range(faces, num_vertices: int) -> None:
+    """Raise ``ValueError`` naming the faces with a vertex index outside ``[0, num_vertices)``."""
+    bad = faces_out_of_range(faces, num_vertices)
+    if bad:
+        raise ValueError(face_range_message(bad, num_vertices))
+
+
 def as_faces(faces) -> torch.Tensor:
     """Return ``faces`` as a ``(F, 3)`` int64 tensor, or raise ``ValueError``.
 

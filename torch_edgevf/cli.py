@@ -412,6 +412,7 @@ def cmd_info(args) -> int:
     and what repair would do, also with the flags that close the cracks."""
     import numpy as np
 
+    from ._validation import face_range_message, faces_out_of_range
     from .mesh.repair import repair
 
     tol = _crack_tol(args)
@@ -424,13 +425,10 @@ def cmd_info(args) -> int:
             f"{len(bad)} vertices with NaN or Inf coordinates at file vertices [{_some(bad)}]"
             " (the loader rejects the file; repair drops their faces)"
         )
-    outside = ((faces < 0) | (faces >= len(verts))).any(1)
-    if outside.any():
-        bad = np.flatnonzero(outside).tolist()
-        problems.append(
-            f"{len(bad)} faces with vertex indices outside [0, {len(verts)}) at faces [{_some(bad)}]"
-        )
-        faces = faces[~outside]
+    outside = faces_out_of_range(faces, len(verts))
+    if outside:
+        problems.append(f"{len(outside)} {face_range_message(outside, len(verts))}")
+        faces = np.delete(faces, outside, axis=0)
     problems += report.problems
     if len(faces) == 0:
         problems.append("no faces")
@@ -527,16 +525,14 @@ def cmd_repair(args) -> int:
     """Repair a mesh file and write the result (and, with --maps, the maps back to the input)."""
     import numpy as np
 
+    from ._validation import face_range_message, faces_out_of_range
     from .io import save_mesh
     from .mesh.repair import repair
 
     verts, faces, report = _read_soup(args.mesh)
-    outside = ((faces < 0) | (faces >= len(verts))).any(1)
-    if outside.any():
-        raise ValueError(
-            f"{int(outside.sum())} faces have vertex indices outside [0, {len(verts)}) at faces "
-            f"[{_some(np.flatnonzero(outside).tolist())}]"
-        )
+    outside = faces_out_of_range(faces, len(verts))
+    if outside:
+        raise ValueError(f"{len(outside)} {face_range_message(outside, len(verts))}")
     result = repair(
         verts,
         faces,

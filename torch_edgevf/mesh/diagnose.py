@@ -25,7 +25,7 @@ from itertools import chain
 
 import numpy as np
 
-from .._validation import as_faces, as_verts, list_some
+from .._validation import as_faces, as_verts, check_face_range, list_some
 from .geometry import face_geometry
 from .topology import Topology
 
@@ -171,10 +171,7 @@ def _as_arrays(verts, faces) -> tuple[np.ndarray, np.ndarray]:
     """float64 positions and int64 (F, 3) faces, checked (ValueError naming the problem)."""
     v = as_verts(verts).detach().cpu().numpy().astype(np.float64)
     f = as_faces(faces).cpu().numpy()
-    bad = ((f < 0) | (f >= len(v))).any(1)
-    if bad.any():
-        where = list_some(np.flatnonzero(bad).tolist())
-        raise ValueError(f"faces have vertex indices outside [0, {len(v)}) at faces [{where}]")
+    check_face_range(f, len(v))
     return v, f
 
 

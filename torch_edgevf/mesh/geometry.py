@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .._validation import as_faces, as_verts, check_vertex_count, list_some
+from .._validation import as_faces, as_verts, check_face_range, check_vertex_count, list_some
 from .topology import Topology
 
 __all__ = [
@@ -252,12 +252,7 @@ def face_geometry(verts, faces) -> FaceGeometry:
         ft = topo.corner_vertices().to(verts.device)  # indices checked when the topology was built
     else:
         faces = (topo.faces if topo is not None else faces).to(verts.device)
-        out_of_range = (faces < 0) | (faces >= verts.shape[0])
-        if out_of_range.any():
-            bad = torch.nonzero(out_of_range.any(dim=1)).flatten().tolist()
-            raise ValueError(
-                f"faces has vertex indices outside [0, {verts.shape[0]}) in faces [{list_some(bad)}]"
-            )
+        check_face_range(faces, verts.shape[0])
         ft = faces.t().contiguous()
     # Everything below is an (F,) vector: many small 1-D operations beat (F, 3, 3) temporaries.
     coords = verts.t().contiguous()

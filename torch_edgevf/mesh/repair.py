@@ -27,7 +27,7 @@ import scipy.sparse as sp
 import torch
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
-from .._validation import list_some
+from .._validation import face_range_message, list_some
 from .diagnose import COINCIDENT_TOL, _check_tol, _coincident_pairs, _t_junctions
 from .geometry import FaceGeometry
 from .topology import Topology
@@ -1075,10 +1075,7 @@ def _triangulate(faces, nv: int, check: bool = True, v: np.ndarray | None = None
     bad = (flat < 0) | (flat >= nv)
     if check and bad.any():
         owner = np.repeat(np.arange(len(polys)), sizes)
-        raise ValueError(
-            f"faces have vertex indices outside [0, {nv}) at faces "
-            f"[{list_some(np.unique(owner[bad]).tolist())}]"
-        )
+        raise ValueError(face_range_message(np.unique(owner[bad]).tolist(), nv))
     tris, origins, sides = [], [], []
     uniform = isinstance(faces, np.ndarray)
     for k in np.unique(sizes):
