@@ -71,10 +71,10 @@ _STEV = get_lapack_funcs("stev", dtype=np.float64)
 
 def dense_is_faster(n, k):
     """``method="auto"``: dense ``eigh`` for ``n <= 300``, or where ``k`` is a large part of
-    ``n`` (``n <= 6 k``, the Lanczos basis ``3 k`` then at least half of ``n``) up to ``n =
-    4000``, where a dense decomposition of the whole matrix costs less than the Lanczos
-    basis and its reorthogonalization."""
-    return n <= _DENSE_MAX or (n <= 6 * k and n <= _DENSE_MAX_MANY)
+    ``n`` (``n <= 8 k``, the Lanczos basis ``3 k`` then at least three eighths of ``n``) up
+    to ``n = 4000``, where a dense decomposition of the whole matrix costs less than the
+    Lanczos basis and its reorthogonalization."""
+    return n <= _DENSE_MAX or (n <= 8 * k and n <= _DENSE_MAX_MANY)
 
 
 # ----------------------------------------------------------------------------- forward
@@ -767,8 +767,24 @@ def fix_phase(X: np.ndarray) -> np.ndarray:
 
 
 def eig_dense(A, M, k):
-    lam, X = scipy.linalg.eigh(A.toarray(), M.toarray(), subset_by_index=[0, k - 1])
-    return lam, X
+    """The ``k`` smallest eigenpairs of ``(A, M)`` by a dense decomposition.
+
+    For a positive diagonal ``M`` (the lumped masses) the standard problem of
+    :math:`M^{-1/2} A M^{-1/2}` with LAPACK's MRRR driver (``evr``), then :math:`X =
+    M^{-1/2} U`: 1.3-1.4x faster than the generalized problem (128 pairs at ``n = 1,000``);
+    else the generalized ``eigh``.
+    """
+    mdiag = _diagonal(M)
+    if mdiag is None or not np.all(mdiag > 0):
+        lam, X = scipy.linalg.eigh(A.toarray(), M.toarray(), subset_by_index=[0, k - 1])
+        return lam, X
+    d = 1.0 / np.sqrt(mdiag.real)
+    S = A.toarray()
+    S *= d[:, None]
+    S *= d[None, :]
+    lam, U = scipy.linalg.eigh(S, subset_by_index=[0, k - 1], driver="evr", overwrite_a=True)
+    U *= d[:, None]
+    return lam, U
 
 
 def _diagonal(M: sp.spmatrix):
