@@ -4,6 +4,9 @@ One command reproduces the learning table of the README::
 
     python benchmarks/bench_learning.py --data psb_watertight_2k.npz            # fixed split, 3 seeds
     python benchmarks/bench_learning.py --data psb_watertight_2k.npz --folds 5  # stratified 5-fold CV
+    python benchmarks/bench_learning.py --data psb_watertight_2k.npz --folds 5 --only-folds 0,1 \\
+        --json folds01.json                                                     # part of one CV
+    python benchmarks/bench_learning.py --table folds01.json folds234.json      # the table of saved runs
     python benchmarks/bench_learning.py --quick                                 # a small smoke run
 
 Every model is trained with the same recipe, on the same operators, inputs, seeds and
