@@ -63,6 +63,10 @@ MODELS = {
     "edgefieldnet-meanpool": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, pool="mean", log_features=True
     ),
+    # the fields' high frequencies (what the L_c diffusion removes) added back, learned
+    "edgefieldnet-highpass": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, high_pass=True
+    ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
     "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }

@@ -41,6 +41,9 @@ NETWORKS = {
     "edge-meanpool": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, pool="mean"
     ),
+    "edge-highpass": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, high_pass=True
+    ),
     "edge-vertex": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex"
     ),
@@ -57,6 +60,10 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
     v, f = mesh
     torch.manual_seed(0)
     net = NETWORKS[name](head).double().eval()
+    with torch.no_grad():  # the high-pass weights start at zero: make them act
+        for block in getattr(net, "blocks", ()):
+            if getattr(block, "high_pass", None) is not None:
+                block.high_pass.normal_()
     perm = np.random.default_rng(1).permutation(v.shape[0])
     inverse = np.argsort(perm)
     v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
@@ -69,11 +76,15 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
     torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)
 
 
-def test_edge_field_block_gradcheck(mesh):
+@pytest.mark.parametrize("high_pass", [False, True])
+def test_edge_field_block_gradcheck(mesh, high_pass):
     v, f = perturbed_icosphere(1, 0.08, seed=4)
     batch = _batch(v, f)
     torch.manual_seed(0)
-    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0).double()
+    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, high_pass=high_pass).double()
+    if high_pass:  # the weight of the high-pass term, nonzero (it starts at zero)
+        with torch.no_grad():
+            block.high_pass.normal_()
     with torch.no_grad():  # nonzero times, so that the diffusion is exercised
         block.diffusion.raw_times.fill_(0.05)
         block.field_diffusion.raw_times.fill_(0.05)
@@ -89,6 +100,30 @@ def test_edge_field_block_gradcheck(mesh):
     s = block.field_diffusion.raw_times.detach().clone().requires_grad_(True)
     del block.diffusion.raw_times, block.field_diffusion.raw_times
     assert torch.autograd.gradcheck(f_, (x, z, t, s))
+    if high_pass:  # and in the high-pass weight
+        w0 = block.high_pass.detach().clone().requires_grad_(True)
+        del block.high_pass
+
+        def g_(w):
+            block.high_pass = w
+            return torch.view_as_real(block(x.detach(), z.detach(), batch)[1])
+
+        assert torch.autograd.gradcheck(g_, (w0,))
+
+
+def test_high_pass_starts_as_the_network_without_it(mesh):
+    """Zero-initialised and drawing no random numbers: the same seed gives the same network."""
+    batch = _batch(*mesh)
+    torch.manual_seed(0)
+    a = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,)).double().eval()
+    torch.manual_seed(0)
+    b = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), high_pass=True)
+    b = b.double().eval()
+    with torch.no_grad():
+        torch.testing.assert_close(b(batch), a(batch), rtol=0, atol=0)
+        for block in b.blocks:
+            block.high_pass.normal_()
+        assert (b(batch) - a(batch)).abs().max() > 1e-6  # and the weight acts
 
 
 @pytest.mark.parametrize("log_features", [False, True])

@@ -11,7 +11,8 @@ gradient and divergence::
     x (V, C) --linear--> x
     block:  xd = diffuse_L(x)                        learned time per channel, vertex Laplacian
             u  = M_z^{-1} G (xd W)  [+ z A_mix]       gradients and co-gradients of mixed scalars (E, C_v)
-            u  = diffuse_Lc(u)                        learned L_c heat diffusion of the fields
+            ud = diffuse_Lc(u)                        learned L_c heat diffusion of the fields
+            u  = ud  [+ (u - ud) A_hp]                with high_pass: what the diffusion drops, mixed
             x  = x + MLP(x, xd, pool_v tanh Re(u conj(u A)), tanh div u, tanh curl u)
             z  = z + u
     logits: the mass-weighted mean and standard deviation of x, then linear (global);
@@ -44,6 +45,7 @@ from .layers import (
     InvariantReadout,
     LearnedDiffusion,
     ModReLU,
+    complex_linear,
     divergence_features,
     gradient_features,
     invariant_features,
@@ -228,6 +230,12 @@ class EdgeFieldBlock(nn.Module):
     carry : bool
         Mix the fields of the previous blocks into this block's fields (``z A_mix``); off
         for the first block, which has none.
+    high_pass : bool
+        With ``vector="edge"``: add back what the ``L_c`` diffusion removes from the
+        fields, mixed by a learned complex weight initialised at zero
+        (``u = ud + (u - ud) A_hp``, ``ud`` the diffused fields). The diffusion works in
+        a truncated eigenbasis, so ``u - ud`` holds the high frequencies it drops; the
+        block starts as without it and learns how much of them to keep.
     """
 
     def __init__(
@@ -239,6 +247,7 @@ class EdgeFieldBlock(nn.Module):
         vector: str = "edge",
         learn_times: bool = True,
         carry: bool = True,
+        high_pass: bool = False,
     ):
         super().__init__()
         if vector not in _VECTOR:
@@ -259,6 +268,12 @@ class EdgeFieldBlock(nn.Module):
             self.field_diffusion.raw_times.requires_grad_(learn_times)
             extra += 2 * vector_width
         self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
+        # zeros: no random numbers drawn, so a seed initialises the rest as without it
+        self.high_pass = (
+            nn.Parameter(torch.zeros(vector_width, vector_width, 2))
+            if high_pass and vector == "edge"
+            else None
+        )
 
     def forward(self, x, z, batch):
         xd = _diffuse_vertices(self.diffusion, x, batch)
@@ -272,13 +287,16 @@ class EdgeFieldBlock(nn.Module):
             if z is not None and self.mix is not None:
                 u = u + self.mix(z)
             if self.vector == "edge":
-                u = self.field_diffusion(
+                ud = self.field_diffusion(
                     u,
                     batch.edge_mass,
                     evals=batch.edge_evals,
                     evecs=batch.edge_evecs,
                     offsets=batch.edge_offsets,
                 )
+                if self.high_pass is not None:
+                    ud = ud + complex_linear(u - ud, self.high_pass)
+                u = ud
             inv = torch.tanh(invariant_features(u, self.products, modulus=False))
             if self.vector == "edge":
                 feats.append(pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass))
@@ -309,6 +327,7 @@ class EdgeFieldNet(nn.Module):
     head : {"global", "vertex", "face"}
     vector : {"edge", "vertex", "none"}, see :class:`EdgeFieldBlock`
     learn_times : bool
+    high_pass : bool, see :class:`EdgeFieldBlock`
     pool : {"mean_std", "mean"}
         Readout of ``head="global"``: the mass-weighted mean and standard deviation of
         the last block's scalars, then a linear layer (default); or a linear layer per
@@ -337,6 +356,7 @@ class EdgeFieldNet(nn.Module):
         learn_times: bool = True,
         pool: str = "mean_std",
         log_features: bool = False,
+        high_pass: bool = False,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
@@ -344,7 +364,9 @@ class EdgeFieldNet(nn.Module):
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(
-            EdgeFieldBlock(width, vector_width, mlp, dropout, vector, learn_times, carry=i > 0)
+            EdgeFieldBlock(
+                width, vector_width, mlp, dropout, vector, learn_times, carry=i > 0, high_pass=high_pass
+            )
             for i in range(num_blocks)
         )
         self.last = _last_layer(width, out_channels, head, pool)
