@@ -67,6 +67,13 @@ MODELS = {
     "edgefieldnet-highpass": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, log_features=True, high_pass=True
     ),
+    # dropout on the pooled readout / on the vector stream's features entering the MLPs
+    "edgefieldnet-headdrop": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, head_dropout=0.5
+    ),
+    "edgefieldnet-vecdrop": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, vector_dropout=0.5
+    ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
     "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }

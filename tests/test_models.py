@@ -44,6 +44,9 @@ NETWORKS = {
     "edge-highpass": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, high_pass=True
     ),
+    "edge-dropout": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector_dropout=0.5, head_dropout=0.5
+    ),
     "edge-vertex": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex"
     ),
@@ -124,6 +127,41 @@ def test_high_pass_starts_as_the_network_without_it(mesh):
         for block in b.blocks:
             block.high_pass.normal_()
         assert (b(batch) - a(batch)).abs().max() > 1e-6  # and the weight acts
+
+
+@pytest.mark.parametrize("cls", [models.EdgeFieldNet, models.DiffusionNet])
+@pytest.mark.parametrize("pool", ["mean_std", "mean"])
+def test_dropout_options_act_in_training_only(mesh, cls, pool):
+    """Dropout on the readout (and the vector stream): same weights, same eval output; random in training."""
+    batch = _batch(*mesh)
+    small = dict(width=8, num_blocks=2, mlp=(8,), dropout=0.0, pool=pool)
+    if cls is models.EdgeFieldNet:
+        small["vector_width"] = 4
+    extra = dict(head_dropout=0.5, **({"vector_dropout": 0.5} if cls is models.EdgeFieldNet else {}))
+    torch.manual_seed(0)
+    plain = cls(8, 5, **small).double()
+    torch.manual_seed(0)
+    dropped = cls(8, 5, **small, **extra).double()  # no random numbers drawn at construction
+    assert all(torch.equal(p, q) for p, q in zip(plain.state_dict().values(), dropped.state_dict().values()))
+    with torch.no_grad():
+        torch.testing.assert_close(dropped.eval()(batch), plain.eval()(batch), rtol=0, atol=0)
+        dropped.train()
+        torch.manual_seed(1)
+        first = dropped(batch)
+        assert (first - dropped(batch)).abs().max() > 1e-6
+        torch.manual_seed(1)
+        torch.testing.assert_close(dropped(batch), first, rtol=0, atol=0)  # the seed decides
+        plain.train()
+        assert (first - plain(batch)).abs().max() > 1e-6
+
+
+@pytest.mark.parametrize("kwargs", [dict(head_dropout=1.0), dict(vector_dropout=-0.1), dict(head_dropout="a")])
+def test_bad_dropout_is_named(kwargs):
+    with pytest.raises(ValueError, match="must be a probability in"):
+        models.EdgeFieldNet(8, 5, **kwargs)
+    if "head_dropout" in kwargs:
+        with pytest.raises(ValueError, match="head_dropout must be a probability"):
+            models.DiffusionNet(8, 5, **kwargs)
 
 
 @pytest.mark.parametrize("log_features", [False, True])

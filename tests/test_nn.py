@@ -180,6 +180,33 @@ def test_gradient_features_gradcheck(mesh, gradcheck):
     assert gradcheck(lambda w: enn.divergence_features(w, G, mv), (w,))
 
 
+@pytest.mark.parametrize("dtype", [torch.complex128, torch.complex64, torch.float64])
+def test_sparse_product_of_constant_operator_equals_gather(mesh, dtype):
+    """The CSR product of a constant operator and the gather product agree, values and gradients."""
+    from torch_edgevf.learning.layers import _CSR_CACHE, _spmm
+
+    G = ev.gradient(mesh["v"], mesh["topo"]).coalesce()
+    if not dtype.is_complex:
+        G = torch.sparse_coo_tensor(G.indices(), G.values().real, G.shape).coalesce()
+    G = G.to(dtype)
+    tracked = torch.sparse_coo_tensor(G.indices(), G.values().clone().requires_grad_(), G.shape).coalesce()
+    gen = torch.Generator().manual_seed(3)
+    for adjoint, n in ((False, G.shape[1]), (True, G.shape[0])):
+        x = torch.randn(n, 3, dtype=dtype, generator=gen).requires_grad_()
+        y_fast = _spmm(G, x, adjoint=adjoint)
+        y_ref = _spmm(tracked, x, adjoint=adjoint)
+        tol = dict(rtol=1e-5, atol=1e-5) if dtype == torch.complex64 else dict(rtol=1e-12, atol=1e-12)
+        torch.testing.assert_close(y_fast, y_ref, **tol)
+        w = torch.randn(y_ref.shape, dtype=dtype, generator=gen)
+        (g_fast,) = torch.autograd.grad((y_fast * w.conj()).real.sum(), x)
+        (g_ref,) = torch.autograd.grad((y_ref * w.conj()).real.sum(), x)
+        torch.testing.assert_close(g_fast, g_ref, **tol)
+    assert id(G) in _CSR_CACHE  # converted once, kept with the operator
+    key = id(G)
+    del G
+    assert key not in _CSR_CACHE
+
+
 # --------------------------------------------------------------------------- pointwise layers
 
 

@@ -37,6 +37,8 @@ the operator values.
 from __future__ import annotations
 
 import math
+import warnings
+import weakref
 
 import torch
 import torch.nn.functional as F
@@ -104,17 +106,53 @@ def _check_vector(m, n: int, name: str) -> torch.Tensor:
     return m
 
 
+#: CSR copies of ``A`` and ``A^H`` for the sparse operators multiplied by :func:`_spmm`,
+#: kept as long as the operator itself
+_CSR_CACHE: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+
+
+def _csr_pair(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(A, A^H)`` in CSR layout, converted once per operator (``A`` coalesced COO)."""
+    pair = _CSR_CACHE.get(id(A))
+    if pair is None:
+        with warnings.catch_warnings():  # "sparse CSR support is in beta"
+            warnings.simplefilter("ignore", UserWarning)
+            AH = A.t().conj() if A.is_complex() else A.t()
+            pair = (A.to_sparse_csr(), AH.coalesce().to_sparse_csr())
+        _CSR_CACHE[id(A)] = pair
+        weakref.finalize(A, _CSR_CACHE.pop, id(A), None)
+    return pair
+
+
+class _ConstantSpmm(torch.autograd.Function):
+    """``A @ x`` for a constant sparse ``A`` given as CSR ``A`` and ``A^H``; gradient ``A^H g``."""
+
+    @staticmethod
+    def forward(ctx, x, A, AH):
+        ctx.AH = AH
+        return A @ x
+
+    @staticmethod
+    def backward(ctx, g):
+        return ctx.AH @ g, None, None
+
+
 def _spmm(A: torch.Tensor, x: torch.Tensor, adjoint: bool = False) -> torch.Tensor:
     """``A @ x`` (or ``A^H @ x``) for a coalesced sparse ``A`` and a dense ``(N, C)`` ``x``.
 
     Where the values of ``A`` need a gradient, written as a gather and an ``index_add``
     so that gradients reach both ``x`` and the values, for real and complex dtypes
-    alike; otherwise ``torch.sparse.mm`` (gradients reach ``x``; about twice as fast).
+    alike; otherwise a product with CSR copies of ``A`` and ``A^H`` made once per
+    operator (gradients reach ``x``; several times faster than the gather, and than a
+    COO product, which converts and transposes at every call).
     """
     rows, cols = A.indices()
     vals = A.values()
-    if not vals.requires_grad and vals.dtype == x.dtype:
-        return torch.sparse.mm(A.t().conj() if adjoint else A, x)
+    if not vals.requires_grad and vals.dtype == x.dtype and x.layout == torch.strided:
+        A_csr, AH_csr = _csr_pair(A)
+        if adjoint:
+            A_csr, AH_csr = AH_csr, A_csr
+        return _ConstantSpmm.apply(x.contiguous(), A_csr, AH_csr)
     if adjoint:
         rows, cols = cols, rows
         vals = vals.conj() if vals.is_complex() else vals

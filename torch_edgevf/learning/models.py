@@ -88,6 +88,12 @@ def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean
         raise ValueError(f"log_features must be True or False, got {log_features!r}")
 
 
+def _check_dropout(**probabilities) -> None:
+    for name, p in probabilities.items():
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p < 1:
+            raise ValueError(f"{name} must be a probability in [0, 1), got {p!r}")
+
+
 def mini_mlp(sizes, dropout: float = 0.5) -> nn.Sequential:
     """Linear layers with ReLU between them and dropout before every layer but the first."""
     layers: list[nn.Module] = []
@@ -141,20 +147,22 @@ def _inputs(model: nn.Module, batch) -> torch.Tensor:
     return torch.log(f)
 
 
-def _readout(x, last: nn.Linear, batch, head: str, pool: str) -> torch.Tensor:
+def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | None = None) -> torch.Tensor:
     """``last`` applied per vertex, then pooled (``head="global"``), or per vertex / face.
 
     ``pool="mean_std"``: the mass-weighted mean and standard deviation of ``x`` over each
-    mesh, concatenated, then ``last`` (which takes ``2 C`` inputs).
+    mesh, concatenated, then ``last`` (which takes ``2 C`` inputs). ``drop`` (dropout) is
+    applied to what ``last`` takes.
     """
-    if head == "global":
+    if head == "global" and pool == "mean_std":
         w = batch.vertex_mass.to(x.dtype)
-        if pool == "mean":
-            return pool_global(last(x), w, batch.vertex_batch, batch.num_meshes)
         mean = pool_global(x, w, batch.vertex_batch, batch.num_meshes)
         var = pool_global((x - mean[batch.vertex_batch]) ** 2, w, batch.vertex_batch, batch.num_meshes)
-        return last(torch.cat([mean, (var + _STD_EPS).sqrt()], dim=1))
-    x = last(x)
+        pooled = torch.cat([mean, (var + _STD_EPS).sqrt()], dim=1)
+        return last(pooled if drop is None else drop(pooled))
+    x = last(x if drop is None else drop(x))
+    if head == "global":
+        return pool_global(x, batch.vertex_mass.to(x.dtype), batch.vertex_batch, batch.num_meshes)
     if head == "vertex":
         return x
     return x[batch.faces].mean(1)
@@ -236,6 +244,9 @@ class EdgeFieldBlock(nn.Module):
         (``u = ud + (u - ud) A_hp``, ``ud`` the diffused fields). The diffusion works in
         a truncated eigenbasis, so ``u - ud`` holds the high frequencies it drops; the
         block starts as without it and learns how much of them to keep.
+    vector_dropout : float
+        Dropout on the vector stream's features where they enter the per-vertex MLP
+        (pooled invariants, divergence and curl); ``0`` (default) draws no random numbers.
     """
 
     def __init__(
@@ -248,6 +259,7 @@ class EdgeFieldBlock(nn.Module):
         learn_times: bool = True,
         carry: bool = True,
         high_pass: bool = False,
+        vector_dropout: float = 0.0,
     ):
         super().__init__()
         if vector not in _VECTOR:
@@ -274,6 +286,8 @@ class EdgeFieldBlock(nn.Module):
             if high_pass and vector == "edge"
             else None
         )
+        # created only when used, so that a seed draws the same numbers as without it
+        self.vector_dropout = nn.Dropout(vector_dropout) if vector_dropout > 0 and vector != "none" else None
 
     def forward(self, x, z, batch):
         xd = _diffuse_vertices(self.diffusion, x, batch)
@@ -299,11 +313,17 @@ class EdgeFieldBlock(nn.Module):
                 u = ud
             inv = torch.tanh(invariant_features(u, self.products, modulus=False))
             if self.vector == "edge":
-                feats.append(pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass))
                 dc = divergence_features(u, batch.gradient, batch.vertex_mass)
-                feats += [torch.tanh(dc.real), torch.tanh(dc.imag)]
+                vec = [
+                    pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass),
+                    torch.tanh(dc.real),
+                    torch.tanh(dc.imag),
+                ]
             else:
-                feats.append(inv)
+                vec = [inv]
+            if self.vector_dropout is not None:
+                vec = [self.vector_dropout(t) for t in vec]
+            feats += vec
             z = u if z is None else z + u
         return x + self.mlp(torch.cat(feats, dim=1)), z
 
@@ -328,6 +348,10 @@ class EdgeFieldNet(nn.Module):
     vector : {"edge", "vertex", "none"}, see :class:`EdgeFieldBlock`
     learn_times : bool
     high_pass : bool, see :class:`EdgeFieldBlock`
+    vector_dropout : float, see :class:`EdgeFieldBlock`
+    head_dropout : float
+        Dropout on what the output layer takes (the pooled mean and deviation with
+        ``pool="mean_std"``, else the last scalars per vertex).
     pool : {"mean_std", "mean"}
         Readout of ``head="global"``: the mass-weighted mean and standard deviation of
         the last block's scalars, then a linear layer (default); or a linear layer per
@@ -357,19 +381,31 @@ class EdgeFieldNet(nn.Module):
         pool: str = "mean_std",
         log_features: bool = False,
         high_pass: bool = False,
+        vector_dropout: float = 0.0,
+        head_dropout: float = 0.0,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_dropout(dropout=dropout, vector_dropout=vector_dropout, head_dropout=head_dropout)
         self.in_channels, self.head, self.vector = in_channels, head, vector
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(
             EdgeFieldBlock(
-                width, vector_width, mlp, dropout, vector, learn_times, carry=i > 0, high_pass=high_pass
+                width,
+                vector_width,
+                mlp,
+                dropout,
+                vector,
+                learn_times,
+                carry=i > 0,
+                high_pass=high_pass,
+                vector_dropout=vector_dropout,
             )
             for i in range(num_blocks)
         )
         self.last = _last_layer(width, out_channels, head, pool)
+        self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
@@ -378,7 +414,7 @@ class EdgeFieldNet(nn.Module):
         x, z = self.first(_inputs(self, batch)), None
         for block in self.blocks:
             x, z = block(x, z, batch)
-        return _readout(x, self.last, batch, self.head, self.pool)
+        return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
 
 
 # --------------------------------------------------------------------------- DiffusionNet
@@ -406,8 +442,8 @@ class DiffusionNet(nn.Module):
     Needs ``batch.vertex_gradient`` (``compute_operators(..., vertex_gradient=True)``) and
     the eigenpairs of the cotangent Laplacian. Defaults are those of the paper's
     classification experiments: width 64, 4 blocks, MLP (64, 64), dropout 0.5, the
-    mean readout, raw features. ``pool`` and ``log_features`` are those of
-    :class:`EdgeFieldNet`, for comparisons with the same readout and inputs.
+    mean readout, raw features. ``pool``, ``log_features`` and ``head_dropout`` are those
+    of :class:`EdgeFieldNet`, for comparisons with the same readout and inputs.
     """
 
     def __init__(
@@ -421,14 +457,17 @@ class DiffusionNet(nn.Module):
         head: str = "global",
         pool: str = "mean",
         log_features: bool = False,
+        head_dropout: float = 0.0,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_dropout(dropout=dropout, head_dropout=head_dropout)
         self.in_channels, self.head = in_channels, head
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
         self.last = _last_layer(width, out_channels, head, pool)
+        self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
@@ -436,7 +475,7 @@ class DiffusionNet(nn.Module):
         x = self.first(_inputs(self, batch))
         for block in self.blocks:
             x = block(x, batch)
-        return _readout(x, self.last, batch, self.head, self.pool)
+        return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
 
 
 #: the earlier name of :class:`DiffusionNet`
