@@ -155,7 +155,9 @@ def test_dropout_options_act_in_training_only(mesh, cls, pool):
         assert (first - plain(batch)).abs().max() > 1e-6
 
 
-@pytest.mark.parametrize("kwargs", [dict(head_dropout=1.0), dict(vector_dropout=-0.1), dict(head_dropout="a")])
+@pytest.mark.parametrize(
+    "kwargs", [dict(head_dropout=1.0), dict(vector_dropout=-0.1), dict(head_dropout="a")]
+)
 def test_bad_dropout_is_named(kwargs):
     with pytest.raises(ValueError, match="must be a probability in"):
         models.EdgeFieldNet(8, 5, **kwargs)
