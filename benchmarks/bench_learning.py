@@ -19,7 +19,9 @@ the final epoch (no model selection on the test set).
 ``--data`` (or ``$TORCH_EDGEVF_PSB``) is the ``psb_watertight_2k.npz`` file (see the
 README for how to build it); operators are cached on disk in ``--cache`` (default
 ``$TORCH_EDGEVF_CACHE`` or ``~/.cache/torch_edgevf/operators``). ``--split FILE`` takes a
-``.npy`` of one flag per mesh in the file's order (0 train, 1 test).
+``.npy`` of one flag per mesh in the file's order (0 train, 1 test, -1 left out);
+``--validation`` trains on 12 of the 16 training meshes of each class and tests on the
+other 4, leaving the test meshes out, for choosing a design without them.
 """
 
 from __future__ import annotations
@@ -95,6 +97,7 @@ def load_psb(path) -> dict:
         "labels": d["labels"].astype(np.int64),
         "split": d["split"].astype(np.int64),
         "classes": [str(c) for c in d["classes"]],
+        "ids": d["psb_ids"].astype(np.int64) if "psb_ids" in d.files else np.arange(len(d["labels"])),
     }
 
 
@@ -133,8 +136,27 @@ def precompute(dataset: dict, cache_dir) -> tuple[list[MeshBatch], float]:
     return batches, (statistics.mean(computed) if computed else float("nan"))
 
 
-def splits(dataset: dict, folds: int, split_file) -> list[tuple[str, np.ndarray]]:
-    """(name, test mask) per evaluation: the fixed split, a user split, or stratified folds."""
+def validation_flags(dataset: dict, per_class: int = 4) -> np.ndarray:
+    """A split for choosing a design without the test meshes: -1 left out, 0 train, 1 validation.
+
+    Within the fixed split's training meshes of each class, the last ``per_class`` by mesh
+    id are the validation meshes (as the fixed split takes the last 4 of 20 for its test
+    set); the fixed test meshes are left out.
+    """
+    flags = np.where(dataset["split"] == 1, -1, 0)
+    ids = dataset.get("ids", np.arange(len(dataset["labels"])))
+    for c in np.unique(dataset["labels"]):
+        train = np.flatnonzero((dataset["labels"] == c) & (dataset["split"] == 0))
+        flags[train[np.argsort(ids[train])][-per_class:]] = 1
+    return flags
+
+
+def splits(dataset: dict, folds: int, split_file, validation: bool = False):
+    """``(name, train mask, test mask)`` per evaluation.
+
+    The fixed split, a user split (a ``.npy`` of one flag per mesh: 0 train, 1 test, -1
+    left out), the validation split of :func:`validation_flags`, or stratified folds.
+    """
     n = len(dataset["labels"])
     if folds:
         rng = np.random.default_rng(0)
@@ -142,13 +164,21 @@ def splits(dataset: dict, folds: int, split_file) -> list[tuple[str, np.ndarray]
         for c in np.unique(dataset["labels"]):
             idx = rng.permutation(np.flatnonzero(dataset["labels"] == c))
             fold[idx] = np.arange(len(idx)) % folds
-        return [(f"fold{k}", fold == k) for k in range(folds)]
+        return [(f"fold{k}", fold != k, fold == k) for k in range(folds)]
+    if validation:
+        flags = validation_flags(dataset)
+        return [("validation", flags == 0, flags == 1)]
     if split_file:
         flags = np.load(split_file)
-        if flags.shape != (n,) or not np.isin(flags, (0, 1)).all():
-            raise ValueError(f"--split must hold {n} flags of 0 (train) or 1 (test), got shape {flags.shape}")
-        return [("split", flags == 1)]
-    return [("fixed", dataset["split"] == 1)]
+        if flags.shape != (n,) or not np.isin(flags, (-1, 0, 1)).all():
+            raise ValueError(
+                f"--split must hold {n} flags of 0 (train), 1 (test) or -1 (left out), got "
+                f"shape {flags.shape} and values {sorted(set(np.unique(flags).tolist()))[:5]}"
+            )
+        if not (flags == 0).any() or not (flags == 1).any():
+            raise ValueError("--split needs at least one training (0) and one test (1) mesh")
+        return [("split", flags == 0, flags == 1)]
+    return [("fixed", dataset["split"] == 0, dataset["split"] == 1)]
 
 
 # --------------------------------------------------------------------------- training
@@ -319,7 +349,15 @@ def main(argv=None) -> list[dict]:
         metavar="K,...",
         help="with --folds: run only these folds (0-based), to spread one cross-validation over processes",
     )
-    p.add_argument("--split", default=None, help=".npy of 0 (train) / 1 (test) flags, one per mesh")
+    p.add_argument(
+        "--split", default=None, help=".npy of 0 (train) / 1 (test) / -1 (left out) flags, one per mesh"
+    )
+    p.add_argument(
+        "--validation",
+        action="store_true",
+        help="train on 12 of the fixed split's 16 training meshes per class and test on the other 4 "
+        "(the last by id); the fixed test meshes are left out: for choosing a design",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--cache",
@@ -359,8 +397,8 @@ def main(argv=None) -> list[dict]:
         p.error(f"unknown models {unknown}; choose from {sorted(MODELS)}")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
-    if a.folds and a.split:
-        p.error("--folds and --split exclude each other")
+    if sum(map(bool, (a.folds, a.split, a.validation))) > 1:
+        p.error("--folds, --split and --validation exclude each other")
     only_folds = None
     if a.only_folds is not None:
         try:
@@ -407,11 +445,11 @@ def main(argv=None) -> list[dict]:
         flush=True,
     )
     results = []
-    evaluations = splits(dataset, a.folds, a.split)
+    evaluations = splits(dataset, a.folds, a.split, a.validation)
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
-    for split_name, test_mask in evaluations:
-        train_set = [b for b, t in zip(batches, test_mask) if not t]
+    for split_name, train_mask, test_mask in evaluations:
+        train_set = [b for b, t in zip(batches, train_mask) if t]
         test_set = [b for b, t in zip(batches, test_mask) if t]
         for seed in [int(s) for s in a.seeds.split(",")]:
             for name in names:

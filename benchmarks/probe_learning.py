@@ -132,9 +132,9 @@ def main(argv=None) -> list[dict]:
     for name, keys in FEATURE_SETS.items():
         x = torch.cat([features[k] for k in keys], dim=1)
         acc = {}
-        for split, test in evaluations:
-            test = torch.as_tensor(test)
-            acc[split] = probe(x[~test], labels[~test], x[test], labels[test], classes, a.penalty)
+        for split, train, test in evaluations:
+            train, test = torch.as_tensor(train), torch.as_tensor(test)
+            acc[split] = probe(x[train], labels[train], x[test], labels[test], classes, a.penalty)
         cv = [v for s, v in acc.items() if s.startswith("fold")]
         results.append({"features": name, "fixed": acc["fixed"], "folds": cv})
         print(

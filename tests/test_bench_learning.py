@@ -37,7 +37,9 @@ def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
 def test_folds_are_stratified_and_cover_every_mesh_once(bench):
     labels = np.repeat(np.arange(5), 20)
     dataset = {"labels": labels, "split": np.zeros(100, dtype=int)}
-    masks = [m for _, m in bench.splits(dataset, 5, None)]
+    evaluations = bench.splits(dataset, 5, None)
+    assert all((train == ~test).all() for _, train, test in evaluations)
+    masks = [test for _, _, test in evaluations]
     assert (np.sum(masks, axis=0) == 1).all()
     for m in masks:
         assert (np.bincount(labels[m], minlength=5) == 4).all()
@@ -47,12 +49,29 @@ def test_folds_are_stratified_and_cover_every_mesh_once(bench):
 def test_split_file_is_checked(bench, tmp_path):
     dataset = {"labels": np.zeros(10, dtype=int), "split": np.zeros(10, dtype=int)}
     good, bad = tmp_path / "good.npy", tmp_path / "bad.npy"
-    np.save(good, np.array([0, 1] * 5))
+    np.save(good, np.array([0, 1, -1, 1, 0, 0, 1, 0, -1, 0]))
     np.save(bad, np.array([0, 2] * 5))
-    ((name, mask),) = bench.splits(dataset, 0, good)
-    assert name == "split" and mask.sum() == 5
-    with pytest.raises(ValueError, match="0 \\(train\\) or 1 \\(test\\)"):
+    ((name, train, test),) = bench.splits(dataset, 0, good)
+    assert name == "split" and test.sum() == 3 and train.sum() == 5  # -1: in neither
+    with pytest.raises(ValueError, match="0 \\(train\\), 1 \\(test\\) or -1 \\(left out\\)"):
         bench.splits(dataset, 0, bad)
+    np.save(bad, np.array([0, -1] * 5))
+    with pytest.raises(ValueError, match="at least one training"):
+        bench.splits(dataset, 0, bad)
+
+
+def test_validation_split_leaves_the_test_meshes_out(bench):
+    labels = np.repeat(np.arange(3), 20)
+    split = np.tile(np.r_[np.zeros(16, int), np.ones(4, int)], 3)
+    ids = np.arange(60)[::-1].copy()  # ids against the file's order
+    ((name, train, test),) = bench.splits({"labels": labels, "split": split, "ids": ids}, 0, None, True)
+    assert name == "validation"
+    assert not (train & test).any() and not ((train | test) & (split == 1)).any()
+    assert (np.bincount(labels[test]) == 4).all() and (np.bincount(labels[train]) == 12).all()
+    for c in range(3):  # the validation meshes are the training meshes of largest id
+        tr = (labels == c) & (split == 0)
+        assert ids[test & (labels == c)].min() > ids[train & (labels == c)].max()
+        assert (train | test)[tr].all()
 
 
 @pytest.mark.parametrize(
