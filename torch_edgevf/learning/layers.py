@@ -262,7 +262,7 @@ def spectral_diffusion(z, evals, evecs, mass, times, offsets=None) -> torch.Tens
         coeffs = phi.conj().transpose(0, 1) @ x[offsets[b] : offsets[b + 1]].to(dtype)
         coeffs = coeffs * torch.exp(-evals[b][:, None] * times[None, :])
         out.append(phi @ coeffs)
-    return torch.cat(out, dim=0)
+    return out[0] if nb == 1 else torch.cat(out, dim=0)
 
 
 def implicit_diffusion(z, L, mass, times) -> torch.Tensor:
@@ -550,7 +550,7 @@ def invariant_features(z, weight=None, modulus: bool = True) -> torch.Tensor:
         if w.shape[1] != z.shape[1]:
             raise ValueError(f"weight must be ({z.shape[1]}, {z.shape[1]}), got C_out = {w.shape[1]}")
         parts.append((z * w.conj()).real)
-    return torch.cat(parts, dim=1)
+    return parts[0] if len(parts) == 1 else torch.cat(parts, dim=1)
 
 
 class InvariantReadout(nn.Module):
@@ -603,10 +603,15 @@ def pool_edges_to_vertices(x, edges, num_vertices: int, weight=None) -> torch.Te
     if not isinstance(edges, torch.Tensor) or edges.shape != (x.shape[0], 2):
         raise ValueError(f"edges must have shape ({x.shape[0]}, 2)")
     w = _check_weight(weight, x.shape[0], x.real if x.is_complex() else x)
-    idx = edges.to(x.device).reshape(-1)
-    wx = (w[:, None] * x).repeat_interleave(2, dim=0)
-    num = torch.zeros((num_vertices, x.shape[1]), dtype=x.dtype, device=x.device).index_add(0, idx, wx)
-    den = torch.zeros(num_vertices, dtype=w.dtype, device=x.device).index_add(0, idx, w.repeat_interleave(2))
+    e = edges.to(x.device)
+    wx = w[:, None] * x
+    num = torch.zeros((num_vertices, x.shape[1]), dtype=x.dtype, device=x.device)
+    num = num.index_add(0, e[:, 0], wx).index_add(0, e[:, 1], wx)
+    den = (
+        torch.zeros(num_vertices, dtype=w.dtype, device=x.device)
+        .index_add(0, e[:, 0], w)
+        .index_add(0, e[:, 1], w)
+    )
     return num / torch.where(den > 0, den, torch.ones_like(den))[:, None]
 
 
