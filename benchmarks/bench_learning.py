@@ -382,6 +382,12 @@ def main(argv=None) -> list[dict]:
         help="only time the operator precompute per mesh on every 38th mesh (N meshes), "
         "DiffusionNet's against this library's, alternated, and exit",
     )
+    p.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="with --step-time / --precompute-time: how often the models alternate",
+    )
     p.add_argument("--quick", action="store_true", help="4 classes, 8 meshes each, 3 epochs, one seed")
     p.add_argument(
         "--table", nargs="+", metavar="JSON", help="print the table of saved --json results and exit"
@@ -395,6 +401,8 @@ def main(argv=None) -> list[dict]:
     unknown = sorted(set(names) - set(MODELS))
     if unknown:
         p.error(f"unknown models {unknown}; choose from {sorted(MODELS)}")
+    if a.rounds < 1:
+        p.error("--rounds must be at least 1")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
     if sum(map(bool, (a.folds, a.split, a.validation))) > 1:
@@ -426,7 +434,7 @@ def main(argv=None) -> list[dict]:
             "split": dataset["split"][keep],
         }
     if a.precompute_time:
-        times = precompute_times(dataset)
+        times = precompute_times(dataset, rounds=a.rounds)
         base = statistics.mean(times["diffusionnet"])
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.0f}" for t in ts)
@@ -434,7 +442,7 @@ def main(argv=None) -> list[dict]:
         return [{"model": n, "seconds_per_mesh": ts} for n, ts in times.items()]
     batches, precompute_s = precompute(dataset, a.cache)
     if a.step_time:
-        times = step_times(names, batches, len(dataset["classes"]))
+        times = step_times(names, batches, len(dataset["classes"]), rounds=a.rounds)
         base = statistics.mean(times.get("diffusionnet", [float("nan")]))
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.1f}" for t in ts)

@@ -82,6 +82,8 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--only-folds", "0"], "--only-folds needs --folds"),
         (["--folds", "5", "--only-folds", "5"], "0..K-1"),
         (["--folds", "5", "--only-folds", "a"], "comma-separated"),
+        (["--rounds", "0"], "--rounds must be at least 1"),
+        (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
 )
