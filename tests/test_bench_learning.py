@@ -122,3 +122,17 @@ def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
     argv = ["--quick", "--models", "edgefieldnet-scalar", "--folds", "4", "--only-folds", "3,1"]
     results = bench.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
     assert [r["split"] for r in results] == ["fold1", "fold3"]
+
+
+def test_table_keeps_fixed_folds_and_validation_apart(bench):
+    def run(split, acc):
+        return dict(
+            model="m", split=split, test_accuracy=acc, train_seconds=1.0, seconds_per_step=0.1, parameters=7
+        )
+
+    rows = [run("fixed", 0.5), run("fold0", 0.75), run("fold1", 0.25), run("validation", 1.0)]
+    lines = bench.table(rows, ["m"]).splitlines()
+    assert "validation" in lines[0]
+    cells = [c.strip() for c in lines[2].strip("|").split("|")]
+    assert cells[1:4] == ["0.500 ± 0.000 (n=1)", "0.500 ± 0.354 (n=2)", "1.000 ± 0.000 (n=1)"]
+    assert "validation" not in bench.table(rows[:3], ["m"]).splitlines()[0]
