@@ -81,6 +81,16 @@ MODELS = {
 }
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
+VERTEX_LAPLACIANS = ("cotan", "robust")
+
+
+def operator_options(vertex_laplacian: str = "cotan") -> dict:
+    """The options of :func:`compute_operators` for the benchmark (cotan: the cache keys as before)."""
+    if vertex_laplacian not in VERTEX_LAPLACIANS:
+        raise ValueError(f"vertex_laplacian must be one of {VERTEX_LAPLACIANS}, got {vertex_laplacian!r}")
+    if vertex_laplacian == "cotan":
+        return dict(OPERATOR_OPTIONS)
+    return dict(OPERATOR_OPTIONS, vertex_laplacian=vertex_laplacian)
 
 
 # --------------------------------------------------------------------------- data
@@ -119,17 +129,23 @@ def without_degenerate_faces(v, f):
     return v, f
 
 
-def precompute(dataset: dict, cache_dir) -> tuple[list[MeshBatch], float]:
-    """One single-mesh batch per mesh (operators cached); returns the mean seconds per mesh computed."""
+def precompute(dataset: dict, cache_dir, vertex_laplacian: str = "cotan") -> tuple[list[MeshBatch], float]:
+    """One single-mesh batch per mesh (operators cached); returns the mean seconds per mesh computed.
+
+    ``vertex_laplacian``: the Laplacian of the vertex eigenbasis, of the heat kernel
+    signatures and of the vertex diffusion (``"robust"``: DiffusionNet's intrinsic
+    Delaunay Laplacian, see :func:`compute_operators`).
+    """
+    options = operator_options(vertex_laplacian)
     cache = OperatorCache(cache_dir)
     batches, computed = [], []
     for (v, f), label in zip(dataset["meshes"], dataset["labels"]):
         v, f = without_degenerate_faces(v, f)
-        key = cache.key(v, f, **OPERATOR_OPTIONS)
+        key = cache.key(v, f, **options)
         t = time.perf_counter()
         ops = cache.load(key)
         if ops is None:
-            ops = cache.get(v, f, **OPERATOR_OPTIONS)
+            ops = cache.get(v, f, **options)
             computed.append(time.perf_counter() - t)
         x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16)
         batches.append(MeshBatch.from_operators(ops.to(torch.float32), x.float(), int(label)))
@@ -265,7 +281,9 @@ def step_times(names, batches, num_classes: int, rounds: int = 3, passes: int = 
     return out
 
 
-def precompute_times(dataset: dict, rounds: int = 3) -> dict[str, list[float]]:
+def precompute_times(
+    dataset: dict, rounds: int = 3, vertex_laplacian: str = "cotan"
+) -> dict[str, list[float]]:
     """Seconds per mesh of the operator precompute: DiffusionNet's against this library's.
 
     ``diffusionnet``: the steps of DiffusionNet's ``compute_operators`` (robust_laplacian's
@@ -287,7 +305,7 @@ def precompute_times(dataset: dict, rounds: int = 3) -> dict[str, list[float]]:
         meshes.append((np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)))
     steps = {
         "diffusionnet": lambda v, f: bench_peers.diffusionnet_reference(v, f),
-        "edgefieldnet": lambda v, f: compute_operators(v, f, **OPERATOR_OPTIONS),
+        "edgefieldnet": lambda v, f: compute_operators(v, f, **operator_options(vertex_laplacian)),
     }
     out: dict[str, list[float]] = {n: [] for n in steps}
     for fn in steps.values():  # one untimed call each
@@ -302,6 +320,12 @@ def precompute_times(dataset: dict, rounds: int = 3) -> dict[str, list[float]]:
 
 
 # --------------------------------------------------------------------------- report
+
+
+def label(r: dict) -> str:
+    """The row of a run: its model, and the vertex Laplacian when it is not the cotangent one."""
+    lap = r.get("vertex_laplacian", "cotan")
+    return r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
 
 
 def table(results: list[dict], models_run) -> str:
@@ -323,7 +347,7 @@ def table(results: list[dict], models_run) -> str:
         return f"{statistics.mean(xs):.3f} ± {sd:.3f} (n={len(xs)})"
 
     for name in models_run:
-        rs = [r for r in results if r["model"] == name]
+        rs = [r for r in results if label(r) == name]
         fixed = [r["test_accuracy"] for r in rs if r["split"] == "fixed"]
         cv = [r["test_accuracy"] for r in rs if r["split"].startswith("fold")]
         rest = [r["test_accuracy"] for r in rs if r["split"] != "fixed" and not r["split"].startswith("fold")]
@@ -365,6 +389,13 @@ def main(argv=None) -> list[dict]:
     )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
+        "--vertex-laplacian",
+        default="cotan",
+        choices=VERTEX_LAPLACIANS,
+        help="Laplacian of the vertex eigenbasis, the input HKS and the vertex diffusion of every model "
+        "(robust: DiffusionNet's intrinsic Delaunay Laplacian; needs robust_laplacian)",
+    )
+    p.add_argument(
         "--cache",
         default=os.environ.get(
             "TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "operators")
@@ -400,7 +431,7 @@ def main(argv=None) -> list[dict]:
     a = p.parse_args(argv)
     if a.table:
         results = [r for f in a.table for r in json.loads(Path(f).read_text())]
-        print(table(results, list(dict.fromkeys(r["model"] for r in results))))
+        print(table(results, list(dict.fromkeys(label(r) for r in results))))
         return results
     names = [m for m in a.models.split(",") if m]
     unknown = sorted(set(names) - set(MODELS))
@@ -439,13 +470,13 @@ def main(argv=None) -> list[dict]:
             "split": dataset["split"][keep],
         }
     if a.precompute_time:
-        times = precompute_times(dataset, rounds=a.rounds)
+        times = precompute_times(dataset, rounds=a.rounds, vertex_laplacian=a.vertex_laplacian)
         base = statistics.mean(times["diffusionnet"])
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.0f}" for t in ts)
             print(f"{name}: {ms} ms per mesh; mean vs diffusionnet {statistics.mean(ts) / base:.2f}")
         return [{"model": n, "seconds_per_mesh": ts} for n, ts in times.items()]
-    batches, precompute_s = precompute(dataset, a.cache)
+    batches, precompute_s = precompute(dataset, a.cache, a.vertex_laplacian)
     if a.step_time:
         times = step_times(names, batches, len(dataset["classes"]), rounds=a.rounds)
         base = statistics.mean(times.get("diffusionnet", [float("nan")]))
@@ -468,11 +499,13 @@ def main(argv=None) -> list[dict]:
             for name in names:
                 r = train(name, train_set, test_set, seed, a.epochs, len(dataset["classes"]))
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
+                if a.vertex_laplacian != "cotan":
+                    r["vertex_laplacian"] = a.vertex_laplacian
                 print(json.dumps(r), flush=True)
                 results.append(r)
                 if a.json:
                     Path(a.json).write_text(json.dumps(results, indent=1))
-    print(table(results, names))
+    print(table(results, list(dict.fromkeys(label(r) for r in results))))
     if a.profile:
         for name in names:
             report = profile_step(name, batches[0], len(dataset["classes"]))

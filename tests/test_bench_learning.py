@@ -136,3 +136,12 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
     assert cells[1:4] == ["0.500 ± 0.000 (n=1)", "0.500 ± 0.354 (n=2)", "1.000 ± 0.000 (n=1)"]
     assert "own split" not in bench.table(rows[:3], ["m"]).splitlines()[0]
+
+
+def test_vertex_laplacian_options_and_rows(bench):
+    assert bench.operator_options() == bench.OPERATOR_OPTIONS  # the cache keys of cotan runs unchanged
+    assert bench.operator_options("robust")["vertex_laplacian"] == "robust"
+    with pytest.raises(ValueError, match="vertex_laplacian"):
+        bench.operator_options("edge")
+    assert bench.label({"model": "m"}) == "m"
+    assert bench.label({"model": "m", "vertex_laplacian": "robust"}) == "m (robust Laplacian)"

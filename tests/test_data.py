@@ -298,3 +298,51 @@ def test_psb_path_from_argument_or_environment(tmp_path, monkeypatch):
         data.psb_path()
     missing.write_bytes(b"")
     assert data.psb_path() == missing and data.psb_path(str(missing)) == missing
+
+
+# --------------------------------------------------------------------------- robust Laplacian
+
+
+def test_robust_vertex_laplacian_is_cotan_on_a_delaunay_mesh_and_not_on_a_sliver():
+    """Intrinsic Delaunay (robust_laplacian): the cotan Laplacian where that is Delaunay,
+    nonnegative edge weights where the cotan one has a negative one."""
+    pytest.importorskip("robust_laplacian")
+    from torch_edgevf.learning.precompute import robust_vertex_laplacian
+    from torch_edgevf.mesh.topology import Topology
+
+    v, f = ev.icosphere(2)
+    L, m = robust_vertex_laplacian(v, Topology(f, num_vertices=v.shape[0]))
+    C = ev.cotan_laplacian(v, f).to_dense()
+    mass = ev.vertex_mass(v, Topology(f, num_vertices=v.shape[0]), lumped=True).values()
+    torch.testing.assert_close(L.to_dense(), C, rtol=1e-4, atol=1e-4 * C.abs().max().item())
+    torch.testing.assert_close(m, mass, rtol=1e-4, atol=0)
+    # two triangles whose shared edge is not Delaunay (opposite angles sum past pi)
+    v = torch.tensor(
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 0.05, 0.0], [0.5, -0.05, 0.0]], dtype=torch.float64
+    )
+    f = torch.tensor([[0, 1, 2], [1, 0, 3]])
+    C = ev.cotan_laplacian(v, f).to_dense()
+    assert C[0, 1] > 0  # a negative cotan weight on the long edge
+    L, m = robust_vertex_laplacian(v, Topology(f, num_vertices=4))
+    off = L.to_dense() - torch.diag(torch.diagonal(L.to_dense()))
+    assert off.max() <= 1e-12 and abs(L.to_dense().sum()) < 1e-10  # flipped: weights >= 0, rows sum to 0
+    torch.testing.assert_close(m.sum(), torch.tensor(0.05, dtype=torch.float64), rtol=1e-3, atol=0)
+
+
+def test_compute_operators_with_the_robust_laplacian():
+    pytest.importorskip("robust_laplacian")
+    v, f = perturbed_icosphere(2, 0.1, seed=1)
+    o = data.compute_operators(v, f, k_edge=4, k_vertex=8, vertex_laplacian="robust")
+    # the vertex eigenvectors are orthonormal in the mass returned
+    gram = o.vertex_evecs.T @ (o.vertex_mass[:, None] * o.vertex_evecs)
+    torch.testing.assert_close(gram, torch.eye(8, dtype=torch.float64), atol=1e-8, rtol=0)
+    assert o.vertex_evals[0].abs() < 1e-8 and (o.vertex_evals[1:] > 0).all()
+
+
+def test_robust_laplacian_missing_is_named(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "robust_laplacian", None)
+    v, f = ev.icosphere(1)
+    with pytest.raises(ValueError, match="pip install robust_laplacian"):
+        data.compute_operators(v, f, k_edge=4, k_vertex=4, vertex_laplacian="robust")

@@ -26,6 +26,7 @@ __all__ = [
     "MeshFields",
     "MeshOperators",
     "compute_operators",
+    "robust_vertex_laplacian",
     "heat_kernel_signature",
     "vertex_gradient_operator",
 ]
@@ -212,6 +213,28 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     ).coalesce()
 
 
+def robust_vertex_laplacian(verts, topo: Topology, mollify_factor: float = 1e-5):
+    """The intrinsic Delaunay Laplacian and lumped mass of ``robust_laplacian`` (float64).
+
+    Returns ``(L, mass)``: ``L`` a ``(V, V)`` sparse COO tensor (positive semidefinite),
+    ``mass`` ``(V,)``. Raises ``ValueError`` naming the package when it is not installed.
+    """
+    try:
+        import robust_laplacian
+    except ImportError as e:
+        raise ValueError(
+            "vertex_laplacian='robust' needs the robust_laplacian package: pip install robust_laplacian"
+        ) from e
+    v = np.ascontiguousarray(verts.detach().cpu().numpy(), dtype=np.float64)
+    f = np.ascontiguousarray(topo.faces.cpu().numpy(), dtype=np.int64)
+    L, M = robust_laplacian.mesh_laplacian(v, f, mollify_factor=mollify_factor)
+    L = sp.coo_matrix(L)
+    idx = torch.as_tensor(np.vstack([L.row, L.col]).astype(np.int64))
+    vals = torch.as_tensor(L.data, dtype=torch.float64)
+    Lt = torch.sparse_coo_tensor(idx, vals, L.shape, check_invariants=False).coalesce()
+    return Lt, torch.as_tensor(np.asarray(M.diagonal(), dtype=np.float64))
+
+
 def compute_operators(
     verts,
     faces,
@@ -232,9 +255,14 @@ def compute_operators(
     n : int >= 1, symmetry order of ``L_c``
     k_edge, k_vertex : int, numbers of eigenpairs of ``(L_c, M_z)`` and of the vertex
         Laplacian (with the lumped vertex mass)
-    vertex_laplacian : {"cotan", "edge"}
-        ``"cotan"``: cotangent Laplacian (DiffusionNet, and the input features);
-        ``"edge"``: ``L = G^* M_z^{-1} G`` of thesis 4.2.
+    vertex_laplacian : {"cotan", "edge", "robust"}
+        ``"cotan"``: cotangent Laplacian with the lumped vertex mass;
+        ``"edge"``: ``L = G^* M_z^{-1} G`` of thesis 4.2 with the lumped vertex mass;
+        ``"robust"``: the intrinsic Delaunay Laplacian and its lumped mass of Sharp and
+        Crane 2020, from the ``robust_laplacian`` package (``pip install robust_laplacian``;
+        mollification ``1e-5``), as DiffusionNet computes its operators. With
+        ``"robust"`` the ``vertex_mass`` returned is that mass (the one the vertex
+        eigenvectors are orthonormal in).
     vertex_gradient : bool
         Also compute :func:`vertex_gradient_operator` (for the baseline).
     tol : float, optional
@@ -247,8 +275,8 @@ def compute_operators(
     """
     if dtype not in (torch.float32, torch.float64):
         raise ValueError(f"dtype must be torch.float32 or torch.float64, got {dtype!r}")
-    if vertex_laplacian not in ("cotan", "edge"):
-        raise ValueError(f"vertex_laplacian must be 'cotan' or 'edge', got {vertex_laplacian!r}")
+    if vertex_laplacian not in ("cotan", "edge", "robust"):
+        raise ValueError(f"vertex_laplacian must be 'cotan', 'edge' or 'robust', got {vertex_laplacian!r}")
     if not isinstance(n, int) or isinstance(n, bool) or n < 1:
         raise ValueError(f"n must be an integer >= 1, got {n!r}")
     verts = as_verts(verts).detach().to(torch.float64)
@@ -259,10 +287,15 @@ def compute_operators(
             raise ValueError(f"{name} must be an integer in [1, {size - 1}], got {k!r}")
     edge_mass = ops.mass_matrix(verts, topo).values()
     Lc = ops.connection_laplacian(verts, topo, n)
-    vmass = ops.vertex_mass(verts, topo, lumped=True).values()
-    Lv = (
-        ops.cotan_laplacian(verts, topo) if vertex_laplacian == "cotan" else ops.laplace_beltrami(verts, topo)
-    )
+    if vertex_laplacian == "robust":
+        Lv, vmass = robust_vertex_laplacian(verts, topo)
+    else:
+        vmass = ops.vertex_mass(verts, topo, lumped=True).values()
+        Lv = (
+            ops.cotan_laplacian(verts, topo)
+            if vertex_laplacian == "cotan"
+            else ops.laplace_beltrami(verts, topo)
+        )
     with torch.no_grad():
         edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
         vertex = eigsh(Lv, vmass, k_vertex, tol=tol)
