@@ -338,7 +338,10 @@ def table(results: list[dict], models_run) -> str:
     """Markdown: per model, test accuracy on the fixed split (over seeds), over the folds,
     and on other splits (``--validation``, ``--split``) where there are any; time; parameters."""
     base = [r["seconds_per_step"] for r in results if r["model"] == "diffusionnet"]
-    other = any(r["split"] != "fixed" and not r["split"].startswith("fold") for r in results)
+    def own(split: str) -> bool:  # --validation or --split, neither the fixed split nor a fold
+        return split != "fixed" and not split.startswith("fold")
+
+    other = any(own(r["split"]) for r in results)
     head = "| model | fixed split (mean ± std) | cross-validation (mean ± std) |"
     head += " validation or own split (mean ± std) |" if other else ""
     lines = [
@@ -356,7 +359,7 @@ def table(results: list[dict], models_run) -> str:
         rs = [r for r in results if label(r) == name]
         fixed = [r["test_accuracy"] for r in rs if r["split"] == "fixed"]
         cv = [r["test_accuracy"] for r in rs if r["split"].startswith("fold")]
-        rest = [r["test_accuracy"] for r in rs if r["split"] != "fixed" and not r["split"].startswith("fold")]
+        rest = [r["test_accuracy"] for r in rs if own(r["split"])]
         ratio = (
             (statistics.mean(r["seconds_per_step"] for r in rs) / statistics.mean(base))
             if base
