@@ -338,6 +338,7 @@ def table(results: list[dict], models_run) -> str:
     """Markdown: per model, test accuracy on the fixed split (over seeds), over the folds,
     and on other splits (``--validation``, ``--split``) where there are any; time; parameters."""
     base = [r["seconds_per_step"] for r in results if r["model"] == "diffusionnet"]
+
     def own(split: str) -> bool:  # --validation or --split, neither the fixed split nor a fold
         return split != "fixed" and not split.startswith("fold")
 
