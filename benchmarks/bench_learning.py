@@ -88,6 +88,8 @@ MODELS = {
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
 VERTEX_LAPLACIANS = ("cotan", "robust")
+#: epochs whose final weights are averaged (those after the learning rate is halved at 50)
+AVERAGE_EPOCHS = 10
 
 
 def operator_options(vertex_laplacian: str = "cotan") -> dict:
@@ -236,17 +238,34 @@ def accuracy(model, batches) -> float:
     return correct / max(len(batches), 1)
 
 
-def train(name: str, train_set, test_set, seed: int, epochs: int, num_classes: int) -> dict:
+def fit(name: str, train_set, seed: int, epochs: int, num_classes: int, average: int = AVERAGE_EPOCHS):
+    """Train model ``name``: ``(model, averaged model or None, seconds)``.
+
+    The averaged model holds the mean of the weights after each of the last ``average``
+    epochs (stochastic weight averaging, :class:`torch.optim.swa_utils.AveragedModel`).
+    Averaging draws no random numbers: the final weights are those of a run without it.
+    """
     model, opt = new_model(name, train_set[0], num_classes, seed)
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=50, gamma=0.5)
+    averaged = torch.optim.swa_utils.AveragedModel(model) if average > 0 else None
     order = torch.Generator().manual_seed(seed)
     start = time.perf_counter()
-    for _ in range(epochs):
+    for epoch in range(epochs):
         for i in torch.randperm(len(train_set), generator=order).tolist():
             train_step(model, opt, train_set[i])
         sched.step()
-    seconds = time.perf_counter() - start
-    return {
+        if averaged is not None and epoch >= epochs - average:
+            averaged.update_parameters(model)
+    return model, averaged, time.perf_counter() - start
+
+
+def train(
+    name: str, train_set, test_set, seed: int, epochs: int, num_classes: int, average: int = AVERAGE_EPOCHS
+) -> dict:
+    """The record of one run: accuracies after the final epoch and, with ``average``, those
+    of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`)."""
+    model, averaged, seconds = fit(name, train_set, seed, epochs, num_classes, average)
+    out = {
         "model": name,
         "seed": seed,
         "test_accuracy": accuracy(model, test_set),
@@ -255,6 +274,13 @@ def train(name: str, train_set, test_set, seed: int, epochs: int, num_classes: i
         "seconds_per_step": seconds / max(epochs * len(train_set), 1),
         "parameters": sum(p.numel() for p in model.parameters()),
     }
+    if averaged is not None:
+        out.update(
+            average_epochs=min(average, epochs),
+            averaged_test_accuracy=accuracy(averaged.module, test_set),
+            averaged_train_accuracy=accuracy(averaged.module, train_set),
+        )
+    return out
 
 
 def profile_step(name: str, batch, num_classes: int, rows: int = 12) -> str:
@@ -329,9 +355,28 @@ def precompute_times(
 
 
 def label(r: dict) -> str:
-    """The row of a run: its model, and the vertex Laplacian when it is not the cotangent one."""
+    """The row of a run: its model, the vertex Laplacian when it is not the cotangent one,
+    and whether the accuracy is that of the averaged weights (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
-    return r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
+    name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
+    return f"{name}, averaged last {r['average_epochs']}" if r.get("averaged") else name
+
+
+def with_averaged(results: list[dict]) -> list[dict]:
+    """Each run, followed by a row of its averaged weights' accuracies where it has them."""
+    out = []
+    for r in results:
+        out.append(r)
+        if "averaged_test_accuracy" in r:
+            out.append(
+                dict(
+                    r,
+                    averaged=True,
+                    test_accuracy=r["averaged_test_accuracy"],
+                    train_accuracy=r["averaged_train_accuracy"],
+                )
+            )
+    return out
 
 
 def table(results: list[dict], models_run) -> str:
@@ -397,6 +442,13 @@ def main(argv=None) -> list[dict]:
         help="train on 12 of the fixed split's 16 training meshes per class and test on the other 4 "
         "(the last by id); the fixed test meshes are left out: for choosing a design",
     )
+    p.add_argument(
+        "--average",
+        type=int,
+        default=AVERAGE_EPOCHS,
+        metavar="N",
+        help="also report the accuracy of the weights averaged over the last N epochs (0: off)",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--vertex-laplacian",
@@ -440,7 +492,7 @@ def main(argv=None) -> list[dict]:
     )
     a = p.parse_args(argv)
     if a.table:
-        results = [r for f in a.table for r in json.loads(Path(f).read_text())]
+        results = with_averaged([r for f in a.table for r in json.loads(Path(f).read_text())])
         print(table(results, list(dict.fromkeys(label(r) for r in results))))
         return results
     names = [m for m in a.models.split(",") if m]
@@ -449,6 +501,8 @@ def main(argv=None) -> list[dict]:
         p.error(f"unknown models {unknown}; choose from {sorted(MODELS)}")
     if a.rounds < 1:
         p.error("--rounds must be at least 1")
+    if a.average < 0:
+        p.error("--average must be 0 (off) or a number of epochs")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
     if sum(map(bool, (a.folds, a.split, a.validation))) > 1:
@@ -507,7 +561,7 @@ def main(argv=None) -> list[dict]:
         test_set = [b for b, t in zip(batches, test_mask) if t]
         for seed in [int(s) for s in a.seeds.split(",")]:
             for name in names:
-                r = train(name, train_set, test_set, seed, a.epochs, len(dataset["classes"]))
+                r = train(name, train_set, test_set, seed, a.epochs, len(dataset["classes"]), a.average)
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
@@ -515,7 +569,8 @@ def main(argv=None) -> list[dict]:
                 results.append(r)
                 if a.json:
                     Path(a.json).write_text(json.dumps(results, indent=1))
-    print(table(results, list(dict.fromkeys(label(r) for r in results))))
+    rows = with_averaged(results)
+    print(table(rows, list(dict.fromkeys(label(r) for r in rows))))
     if a.profile:
         for name in names:
             report = profile_step(name, batches[0], len(dataset["classes"]))

@@ -3,9 +3,11 @@
 import importlib.util
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import torch
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_learning.py"
 
@@ -83,6 +85,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--folds", "5", "--only-folds", "5"], "0..K-1"),
         (["--folds", "5", "--only-folds", "a"], "comma-separated"),
         (["--rounds", "0"], "--rounds must be at least 1"),
+        (["--average", "-1"], "--average must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -145,3 +148,52 @@ def test_vertex_laplacian_options_and_rows(bench):
         bench.operator_options("edge")
     assert bench.label({"model": "m"}) == "m"
     assert bench.label({"model": "m", "vertex_laplacian": "robust"}) == "m (robust Laplacian)"
+
+
+class _MeanLinear(torch.nn.Module):
+    """A stand-in model: a linear map of each mesh's mean feature, with dropout."""
+
+    def __init__(self, c_in, c_out):
+        super().__init__()
+        self.linear, self.drop = torch.nn.Linear(c_in, c_out), torch.nn.Dropout(0.5)
+
+    def forward(self, batch):
+        return self.linear(self.drop(batch.features.mean(0, keepdim=True)))
+
+
+def _toy_batches(n=12, classes=3):
+    g = torch.Generator().manual_seed(5)
+    return [
+        SimpleNamespace(
+            features=torch.randn(7, 4, generator=g) + i % classes, labels=torch.tensor(i % classes)
+        )
+        for i in range(n)
+    ]
+
+
+def test_averaged_weights_are_the_mean_of_the_last_epochs(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches()
+    model, averaged, _ = bench.fit("toy", batches, seed=3, epochs=5, num_classes=3, average=3)
+    finals = [bench.fit("toy", batches, seed=3, epochs=e, num_classes=3, average=0)[0] for e in (3, 4, 5)]
+    assert bench.fit("toy", batches, 3, 5, 3, average=0)[1] is None
+    for name, p in model.named_parameters():  # averaging leaves the run's own weights as they were
+        torch.testing.assert_close(p, dict(finals[-1].named_parameters())[name], rtol=0, atol=0)
+    for name, p in averaged.module.named_parameters():
+        mean = torch.stack([dict(m.named_parameters())[name] for m in finals]).mean(0)
+        torch.testing.assert_close(p, mean)
+    assert not torch.equal(averaged.module.linear.weight, model.linear.weight)
+
+
+def test_run_records_and_table_rows_of_averaged_weights(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches()
+    r = bench.train("toy", batches[:9], batches[9:], seed=0, epochs=4, num_classes=3, average=10)
+    assert r["average_epochs"] == 4 and 0 <= r["averaged_test_accuracy"] <= 1
+    assert "average_epochs" not in bench.train("toy", batches[:9], batches[9:], 0, 2, 3, average=0)
+    r.update(split="fixed", test_accuracy=0.25, averaged_test_accuracy=0.75)
+    rows = bench.with_averaged([r])
+    assert [bench.label(x) for x in rows] == ["toy", "toy, averaged last 4"]
+    lines = bench.table(rows, [bench.label(x) for x in rows]).splitlines()
+    assert lines[2].startswith("| toy | 0.250 ± 0.000 (n=1)")
+    assert lines[3].startswith("| toy, averaged last 4 | 0.750 ± 0.000 (n=1)")
