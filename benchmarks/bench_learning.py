@@ -88,6 +88,8 @@ MODELS = {
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
 VERTEX_LAPLACIANS = ("cotan", "robust")
+#: largest stretch factor of the augmented copies (see :func:`stretched`)
+STRETCH = 1.25
 #: epochs whose final weights are averaged (those after the learning rate is halved at 50)
 AVERAGE_EPOCHS = 10
 
@@ -158,6 +160,44 @@ def precompute(dataset: dict, cache_dir, vertex_laplacian: str = "cotan") -> tup
         x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16)
         batches.append(MeshBatch.from_operators(ops.to(torch.float32), x.float(), int(label)))
     return batches, (statistics.mean(computed) if computed else float("nan"))
+
+
+def stretched(v: np.ndarray, index: int, copy: int, spread: float = STRETCH) -> np.ndarray:
+    """Copy ``copy`` of mesh ``index``, stretched: a random rotation ``R``, the vertices
+    scaled along its axes by factors drawn log-uniformly in ``[1 / spread, spread]``
+    (``v R diag(s) R^T``), then centred and scaled to the unit bounding sphere again, as
+    the dataset's meshes are. A non-rigid change of the intrinsic geometry that keeps the
+    class; the same arguments give the same copy (so its operators are cached once)."""
+    rng = np.random.default_rng([index, copy])
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    rot = q * np.sign(np.diag(r))
+    scale = np.exp(rng.uniform(-np.log(spread), np.log(spread), 3))
+    w = (v - v.mean(0)) @ rot * scale @ rot.T
+    w -= (w.max(0) + w.min(0)) / 2
+    return w / np.linalg.norm(w, axis=1).max()
+
+
+def precompute_copies(
+    dataset: dict, cache_dir, copies: int, keep: np.ndarray, vertex_laplacian: str = "cotan"
+) -> list[list[MeshBatch]]:
+    """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`; none for
+    meshes where ``keep`` is False), with their operators cached like the meshes'."""
+    if copies == 0:
+        return [[] for _ in dataset["labels"]]
+    picked = np.flatnonzero(keep)
+    variants = {
+        "meshes": [
+            (stretched(dataset["meshes"][i][0], int(i), c), dataset["meshes"][i][1])
+            for i in picked
+            for c in range(copies)
+        ],
+        "labels": np.repeat(dataset["labels"][picked], copies),
+    }
+    batches, _ = precompute(variants, cache_dir, vertex_laplacian)
+    out: list[list[MeshBatch]] = [[] for _ in dataset["labels"]]
+    for j, i in enumerate(picked):
+        out[i] = batches[j * copies : (j + 1) * copies]
+    return out
 
 
 def validation_flags(dataset: dict, per_class: int = 4) -> np.ndarray:
@@ -238,21 +278,36 @@ def accuracy(model, batches) -> float:
     return correct / max(len(batches), 1)
 
 
-def fit(name: str, train_set, seed: int, epochs: int, num_classes: int, average: int = AVERAGE_EPOCHS):
+def fit(
+    name: str,
+    train_set,
+    seed: int,
+    epochs: int,
+    num_classes: int,
+    average: int = AVERAGE_EPOCHS,
+    copies: list | None = None,
+):
     """Train model ``name``: ``(model, averaged model or None, seconds)``.
 
     The averaged model holds the mean of the weights after each of the last ``average``
     epochs (stochastic weight averaging, :class:`torch.optim.swa_utils.AveragedModel`).
     Averaging draws no random numbers: the final weights are those of a run without it.
+    ``copies[i]``: augmented copies of ``train_set[i]``; each step then takes the mesh or
+    one of its copies, drawn uniformly (the same number of steps as without them).
     """
     model, opt = new_model(name, train_set[0], num_classes, seed)
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=50, gamma=0.5)
     averaged = torch.optim.swa_utils.AveragedModel(model) if average > 0 else None
     order = torch.Generator().manual_seed(seed)
+    pick = torch.Generator().manual_seed(seed)  # apart from the order: that stays as without copies
     start = time.perf_counter()
     for epoch in range(epochs):
         for i in torch.randperm(len(train_set), generator=order).tolist():
-            train_step(model, opt, train_set[i])
+            batch = train_set[i]
+            if copies and copies[i]:
+                k = int(torch.randint(len(copies[i]) + 1, (1,), generator=pick))
+                batch = copies[i][k - 1] if k else batch
+            train_step(model, opt, batch)
         sched.step()
         if averaged is not None and epoch >= epochs - average:
             averaged.update_parameters(model)
@@ -260,11 +315,19 @@ def fit(name: str, train_set, seed: int, epochs: int, num_classes: int, average:
 
 
 def train(
-    name: str, train_set, test_set, seed: int, epochs: int, num_classes: int, average: int = AVERAGE_EPOCHS
+    name: str,
+    train_set,
+    test_set,
+    seed: int,
+    epochs: int,
+    num_classes: int,
+    average: int = AVERAGE_EPOCHS,
+    copies: list | None = None,
 ) -> dict:
     """The record of one run: accuracies after the final epoch and, with ``average``, those
-    of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`)."""
-    model, averaged, seconds = fit(name, train_set, seed, epochs, num_classes, average)
+    of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`).
+    Training accuracy is that on ``train_set`` (without the copies)."""
+    model, averaged, seconds = fit(name, train_set, seed, epochs, num_classes, average, copies)
     out = {
         "model": name,
         "seed": seed,
@@ -356,9 +419,11 @@ def precompute_times(
 
 def label(r: dict) -> str:
     """The row of a run: its model, the vertex Laplacian when it is not the cotangent one,
-    and whether the accuracy is that of the averaged weights (see :func:`with_averaged`)."""
+    the augmentation if any, and whether the accuracy is that of the averaged weights (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
+    if r.get("augment"):
+        name += f", {r['augment']} stretched copies"
     return f"{name}, averaged last {r['average_epochs']}" if r.get("averaged") else name
 
 
@@ -449,6 +514,14 @@ def main(argv=None) -> list[dict]:
         metavar="N",
         help="also report the accuracy of the weights averaged over the last N epochs (0: off)",
     )
+    p.add_argument(
+        "--augment",
+        type=int,
+        default=0,
+        metavar="K",
+        help=f"K stretched copies of each training mesh (random stretch up to {STRETCH}, operators cached); "
+        "each step takes the mesh or one of its copies",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--vertex-laplacian",
@@ -501,6 +574,8 @@ def main(argv=None) -> list[dict]:
         p.error(f"unknown models {unknown}; choose from {sorted(MODELS)}")
     if a.rounds < 1:
         p.error("--rounds must be at least 1")
+    if a.augment < 0:
+        p.error("--augment must be 0 (off) or a number of copies")
     if a.average < 0:
         p.error("--average must be 0 (off) or a number of epochs")
     if a.folds == 1 or a.folds < 0:
@@ -556,13 +631,27 @@ def main(argv=None) -> list[dict]:
     evaluations = splits(dataset, a.folds, a.split, a.validation)
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
+    trained = np.any([m for _, m, _ in evaluations], axis=0)
+    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
+        train_copies = [c for c, t in zip(copies, train_mask) if t]
         test_set = [b for b, t in zip(batches, test_mask) if t]
         for seed in [int(s) for s in a.seeds.split(",")]:
             for name in names:
-                r = train(name, train_set, test_set, seed, a.epochs, len(dataset["classes"]), a.average)
+                r = train(
+                    name,
+                    train_set,
+                    test_set,
+                    seed,
+                    a.epochs,
+                    len(dataset["classes"]),
+                    a.average,
+                    train_copies,
+                )
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
+                if a.augment:
+                    r["augment"] = a.augment
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
                 print(json.dumps(r), flush=True)

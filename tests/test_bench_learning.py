@@ -86,6 +86,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--folds", "5", "--only-folds", "a"], "comma-separated"),
         (["--rounds", "0"], "--rounds must be at least 1"),
         (["--average", "-1"], "--average must be 0"),
+        (["--augment", "-1"], "--augment must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -197,3 +198,40 @@ def test_run_records_and_table_rows_of_averaged_weights(bench, monkeypatch):
     lines = bench.table(rows, [bench.label(x) for x in rows]).splitlines()
     assert lines[2].startswith("| toy | 0.250 ± 0.000 (n=1)")
     assert lines[3].startswith("| toy, averaged last 4 | 0.750 ± 0.000 (n=1)")
+
+
+def test_stretched_copies_are_reproducible_non_rigid_and_normalised(bench):
+    rng = np.random.default_rng(0)
+    v = rng.standard_normal((50, 3)) * [2.0, 1.0, 0.5] + 3.0
+    w = bench.stretched(v, index=7, copy=1)
+    np.testing.assert_array_equal(w, bench.stretched(v, index=7, copy=1))
+    assert not np.allclose(w, bench.stretched(v, index=7, copy=2))
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1).max(), 1.0)
+    np.testing.assert_allclose((w.max(0) + w.min(0)) / 2, 0.0, atol=1e-12)
+    # not a similarity: ratios of distances change, within the stretch's bounds
+    d0 = np.linalg.norm(v[:, None] - v[None], axis=-1)[np.triu_indices(50, 1)]
+    d1 = np.linalg.norm(w[:, None] - w[None], axis=-1)[np.triu_indices(50, 1)]
+    ratio = d1 / d0
+    assert ratio.max() / ratio.min() > 1.05
+    assert ratio.max() / ratio.min() <= bench.STRETCH**2 + 1e-9
+
+
+def test_training_steps_draw_the_mesh_or_its_copies(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches(6)
+    copies = [
+        [SimpleNamespace(features=b.features + 0.5, labels=b.labels) for _ in range(2)] for b in batches
+    ]
+    seen = []
+    step = bench.train_step
+    monkeypatch.setattr(bench, "train_step", lambda m, o, b: (seen.append(b), step(m, o, b)))
+    bench.fit("toy", batches, seed=1, epochs=20, num_classes=3, average=0, copies=copies)
+    originals = sum(any(b is x for x in batches) for b in seen)
+    assert len(seen) == 120 and 25 <= originals <= 55  # a third of the steps, drawn uniformly
+    assert {id(b) for b in seen} <= {id(x) for x in batches} | {id(c) for cs in copies for c in cs}
+    # without copies (or empty ones) the run is the one it was
+    seen.clear()
+    plain = bench.fit("toy", batches, seed=1, epochs=3, num_classes=3, average=0)[0]
+    empty = bench.fit("toy", batches, seed=1, epochs=3, num_classes=3, average=0, copies=[[]] * 6)[0]
+    assert all(any(b is x for x in batches) for b in seen)
+    torch.testing.assert_close(plain.linear.weight, empty.linear.weight, rtol=0, atol=0)
