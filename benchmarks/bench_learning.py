@@ -181,22 +181,24 @@ def precompute_copies(
     dataset: dict, cache_dir, copies: int, keep: np.ndarray, vertex_laplacian: str = "cotan"
 ) -> list[list[MeshBatch]]:
     """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`; none for
-    meshes where ``keep`` is False), with their operators cached like the meshes'."""
-    if copies == 0:
-        return [[] for _ in dataset["labels"]]
-    picked = np.flatnonzero(keep)
-    variants = {
-        "meshes": [
-            (stretched(dataset["meshes"][i][0], int(i), c), dataset["meshes"][i][1])
-            for i in picked
-            for c in range(copies)
-        ],
-        "labels": np.repeat(dataset["labels"][picked], copies),
-    }
-    batches, _ = precompute(variants, cache_dir, vertex_laplacian)
+    meshes where ``keep`` is False), with their operators cached like the meshes'.
+
+    A copy whose operators cannot be computed (a stretch can turn a nearly degenerate face
+    into one whose eigenpairs are lost to rounding: ``ValueError``) is left out, and
+    reported.
+    """
     out: list[list[MeshBatch]] = [[] for _ in dataset["labels"]]
-    for j, i in enumerate(picked):
-        out[i] = batches[j * copies : (j + 1) * copies]
+    dropped = []
+    for i in np.flatnonzero(keep) if copies else []:
+        v, f = dataset["meshes"][i]
+        for c in range(copies):
+            one = {"meshes": [(stretched(v, int(i), c), f)], "labels": dataset["labels"][i : i + 1]}
+            try:
+                out[i] += precompute(one, cache_dir, vertex_laplacian)[0]
+            except ValueError as e:
+                dropped.append(f"mesh {int(i)} copy {c}: {str(e)[:80]}")
+    if dropped:
+        print(f"augment: left out {len(dropped)} copies: " + "; ".join(dropped), flush=True)
     return out
 
 
@@ -419,7 +421,8 @@ def precompute_times(
 
 def label(r: dict) -> str:
     """The row of a run: its model, the vertex Laplacian when it is not the cotangent one,
-    the augmentation if any, and whether the accuracy is that of the averaged weights (see :func:`with_averaged`)."""
+    the augmentation if any, and whether the accuracy is that of the averaged weights
+    (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
     if r.get("augment"):

@@ -57,6 +57,8 @@ from .factor import factorize
 from .lanczos import METHODS, default_shift
 
 logger = logging.getLogger(__name__)
+#: A_ii / M_ii this many times the median marks rows of an ill-conditioned pencil
+_ILL_CONDITIONED = 1e8
 
 __all__ = ["EigenPairs", "eigsh", "default_shift"]
 
@@ -77,6 +79,24 @@ def _pattern_outer(left, right, data: SparseData):
 
 def _to_input(grad, values):
     return grad if values.is_complex() else grad.real.to(values.dtype)
+
+
+def _unreliable_message(A, M, e) -> str:
+    """Why the eigenpairs are not returned, and the rows to look at when one is to blame."""
+    ratio = np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(M.dtype).tiny)
+    median = float(np.median(ratio)) if ratio.size else 0.0
+    msg = f"eigsh: {e}; the eigenpairs would be wrong, so none are returned"
+    if median > 0 and ratio.max() > _ILL_CONDITIONED * median:
+        rows = np.argsort(ratio)[::-1][: min(5, int((ratio > _ILL_CONDITIONED * median).sum()))]
+        msg += (
+            f". Rows {rows.tolist()} have A_ii / M_ii up to {ratio.max() / median:.1e} times the "
+            "median: nearly degenerate faces (needles, caps) at those vertices or edges make the low "
+            "eigenpairs ill-conditioned; repair the mesh (torch_edgevf.mesh.repair) or use the "
+            "intrinsic Delaunay Laplacian"
+        )
+    else:
+        msg += "; raise maxiter or tol"
+    return msg
 
 
 def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
@@ -147,12 +167,15 @@ class _Eigsh(torch.autograd.Function):
         ctx.factor = None
         if method == "auto":
             method = "dense" if lanczos.dense_is_faster(A.shape[0], k) else "lanczos"
-        if method == "dense":
-            lam, X = lanczos.eig_dense(A, M, k)
-        else:
-            lam, X, ctx.factor = lanczos.shift_invert_eigsh(
-                A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
-            )
+        try:
+            if method == "dense":
+                lam, X = lanczos.eig_dense(A, M, k)
+            else:
+                lam, X, ctx.factor = lanczos.shift_invert_eigsh(
+                    A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
+                )
+        except lanczos.Unreliable as e:
+            raise ValueError(_unreliable_message(A, M, e)) from None
         lam, X = scaling.values(lam), scaling.vectors(lanczos.fix_phase(X))
         # the backward's complement solve runs on the normalised pair too
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
