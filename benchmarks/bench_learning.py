@@ -11,10 +11,16 @@ One command reproduces the learning table of the README::
 
 Every model is trained with the same recipe, on the same operators, inputs, seeds and
 threads, one after the other in this process: the 16-scale heat kernel signature of the
-vertex Laplacian as input (no augmentation; every model is invariant to rigid motions),
-one mesh per optimiser step, Adam at ``1e-3`` halved every 50 epochs, label
-smoothing 0.2, dropout 0.5 in the per-vertex MLPs. The accuracy reported is the one after
-the final epoch (no model selection on the test set).
+vertex Laplacian as input (every model is invariant to rigid motions), one mesh per
+optimiser step, Adam at ``1e-3`` halved every 50 epochs, label smoothing 0.2, dropout 0.5
+in the per-vertex MLPs. The accuracy reported is the one after the final epoch (no model
+selection on the test set); each run also reports that of its weights averaged over the
+last ``--average`` epochs (default 10, the epochs after the rate is halved).
+
+``--augment K`` gives every model in the run the same K stretched copies of each training
+mesh (a random anisotropic stretch by factors up to 1.25, the copy re-centred and scaled to
+the unit sphere as the dataset's meshes are; operators cached); each step takes the mesh or
+one of its copies, so a run takes as many steps as without them.
 
 ``--data`` (or ``$TORCH_EDGEVF_PSB``) is the ``psb_watertight_2k.npz`` file (see the
 README for how to build it); operators are cached on disk in ``--cache`` (default
