@@ -235,3 +235,20 @@ def test_training_steps_draw_the_mesh_or_its_copies(bench, monkeypatch):
     empty = bench.fit("toy", batches, seed=1, epochs=3, num_classes=3, average=0, copies=[[]] * 6)[0]
     assert all(any(b is x for x in batches) for b in seen)
     torch.testing.assert_close(plain.linear.weight, empty.linear.weight, rtol=0, atol=0)
+
+
+def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatch, capsys):
+    v = np.random.default_rng(1).standard_normal((6, 3))
+    dataset = {"meshes": [(v, None), (v + 1, None), (v, None)], "labels": np.array([0, 1, 2])}
+
+    def fake_precompute(one, cache_dir, vertex_laplacian="cotan"):
+        (w, _), label = one["meshes"][0], int(one["labels"][0])
+        if label == 1 and np.allclose(w, bench.stretched(v + 1, 1, 0)):
+            raise ValueError("eigsh: Lanczos did not converge")
+        return [SimpleNamespace(labels=label)], float("nan")
+
+    monkeypatch.setattr(bench, "precompute", fake_precompute)
+    out = bench.precompute_copies(dataset, None, 2, np.array([True, True, False]))
+    assert [len(c) for c in out] == [2, 1, 0] and all(b.labels == 1 for b in out[1])
+    assert "left out 1 copies: mesh 1 copy 0: eigsh: Lanczos did not converge" in capsys.readouterr().out
+    assert bench.precompute_copies(dataset, None, 0, np.ones(3, bool)) == [[], [], []]
