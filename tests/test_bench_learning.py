@@ -252,3 +252,31 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
     assert [len(c) for c in out] == [2, 1, 0] and all(b.labels == 1 for b in out[1])
     assert "left out 1 copies: mesh 1 copy 0: eigsh: Lanczos did not converge" in capsys.readouterr().out
     assert bench.precompute_copies(dataset, None, 0, np.ones(3, bool)) == [[], [], []]
+
+
+def test_readme_learning_table_is_that_of_the_saved_runs(bench):
+    """The README's fixed-split cells are those `--table` gives for the saved runs."""
+    root = BENCH.parents[1]
+    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
+    saved = {}
+    for line in bench.table(runs, list(dict.fromkeys(bench.label(r) for r in runs))).splitlines()[2:]:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        saved[cells[0]] = cells[1].split(" (n=")[0]
+    readme = (root / "README.md").read_text()
+    section = readme[readme.index("### Learning") : readme.index("### Real meshes")]
+    shown = {}
+    for line in section.splitlines():
+        if line.startswith("| ") and not line.startswith("| model"):
+            cells = [c.strip().strip("*") for c in line.strip("|").split("|")]
+            shown[(cells[0], cells[1])] = cells[2]
+    recipe = "stretched copies, averaged weights"
+    assert (
+        shown[("`EdgeFieldNet(log_features=True)`", recipe)]
+        == saved["edgefieldnet, 4 stretched copies, averaged last 10"]
+    )
+    assert (
+        shown[("DiffusionNet (written from the paper)", recipe)]
+        == saved["diffusionnet, 4 stretched copies, averaged last 10"]
+    )
+    assert shown[("DiffusionNet (written from the paper)", "DiffusionNet's")] == saved["diffusionnet"]
+    assert shown[("`EdgeFieldNet(log_features=True)`", "DiffusionNet's")] == saved["edgefieldnet"]
