@@ -50,6 +50,7 @@ import numpy as np
 import torch
 
 from torch_edgevf.learning import models
+from torch_edgevf.learning.augment import random_stretch
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.cache import OperatorCache
 from torch_edgevf.learning.datasets import psb_mesh, psb_path
@@ -169,18 +170,10 @@ def precompute(dataset: dict, cache_dir, vertex_laplacian: str = "cotan") -> tup
 
 
 def stretched(v: np.ndarray, index: int, copy: int, spread: float = STRETCH) -> np.ndarray:
-    """Copy ``copy`` of mesh ``index``, stretched: a random rotation ``R``, the vertices
-    scaled along its axes by factors drawn log-uniformly in ``[1 / spread, spread]``
-    (``v R diag(s) R^T``), then centred and scaled to the unit bounding sphere again, as
-    the dataset's meshes are. A non-rigid change of the intrinsic geometry that keeps the
-    class; the same arguments give the same copy (so its operators are cached once)."""
-    rng = np.random.default_rng([index, copy])
-    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-    rot = q * np.sign(np.diag(r))
-    scale = np.exp(rng.uniform(-np.log(spread), np.log(spread), 3))
-    w = (v - v.mean(0)) @ rot * scale @ rot.T
-    w -= (w.max(0) + w.min(0)) / 2
-    return w / np.linalg.norm(w, axis=1).max()
+    """Copy ``copy`` of mesh ``index``: :func:`random_stretch` by factors up to ``spread``,
+    centred and scaled to the unit bounding sphere again, as the dataset's meshes are. The
+    same arguments give the same copy (so its operators are cached once)."""
+    return random_stretch(v, np.random.default_rng([index, copy]), max_factor=spread)
 
 
 def precompute_copies(

@@ -7,12 +7,13 @@
 * :mod:`.cache`: an on-disk cache of them;
 * :mod:`.batching`: several meshes as one batch (a ``DataLoader``'s ``collate_fn``);
 * :mod:`.datasets`: the Princeton Segmentation Benchmark;
+* :mod:`.augment`: random stretches of meshes, for training;
 * :mod:`.progress`: a progress bar for the precomputation.
 
 ``torch_edgevf.nn``, ``torch_edgevf.models``, ``torch_edgevf.losses`` and
 ``torch_edgevf.data`` re-export these modules under their earlier names.
 """
 
-from . import batching, cache, datasets, layers, losses, models, precompute, progress
+from . import augment, batching, cache, datasets, layers, losses, models, precompute, progress
 
-__all__ = ["batching", "cache", "datasets", "layers", "losses", "models", "precompute", "progress"]
+__all__ = ["augment", "batching", "cache", "datasets", "layers", "losses", "models", "precompute", "progress"]
