@@ -83,7 +83,7 @@ def _to_input(grad, values):
 
 def _unreliable_message(A, M, e) -> str:
     """Why the eigenpairs are not returned, and the rows to look at when one is to blame."""
-    ratio = np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(M.dtype).tiny)
+    ratio = lanczos.diagonal_ratio(A, M)
     median = float(np.median(ratio)) if ratio.size else 0.0
     msg = f"eigsh: {e}; the eigenpairs would be wrong, so none are returned"
     if median > 0 and ratio.max() > _ILL_CONDITIONED * median:

@@ -97,6 +97,12 @@ def dense_is_faster(n, k):
 # ----------------------------------------------------------------------------- forward
 
 
+def diagonal_ratio(A: sp.spmatrix, M: sp.spmatrix) -> np.ndarray:
+    """``|A_ii| / |M_ii|`` per row (``M_ii`` floored at the smallest normal number): its
+    median is about the top of a mesh's spectrum, its outliers mark nearly degenerate faces."""
+    return np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(M.dtype).tiny)
+
+
 def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     """Small negative shift :math:`-\\epsilon\\, \\mathrm{median}_i A_{ii}/M_{ii}`.
 
@@ -107,7 +113,7 @@ def default_shift(A: sp.spmatrix, M: sp.spmatrix) -> float:
     :math:`A - \\sigma M` for a singular ``A`` (about :math:`1/\\epsilon`); the smaller it is,
     the closer the shift to the wanted eigenvalues and the faster the convergence.
     """
-    ratio = np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(M.dtype).tiny)
+    ratio = diagonal_ratio(A, M)
     scale = float(np.median(ratio)) if ratio.size else 1.0
     eps = 1e-3 if np.finfo(A.dtype).bits <= 32 else _SHIFT_EPS
     return -eps * (scale if scale > 0 else 1.0)
@@ -839,8 +845,7 @@ def _check_dense(A, M, lam, X, d) -> None:
         res = np.linalg.norm(R * d[:, None], axis=0)
     else:
         res = np.sqrt(np.abs(np.sum(R.conj() * scipy.linalg.solve(M.toarray(), R, assume_a="pos"), axis=0)))
-    ratio = np.abs(A.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(lam.dtype).tiny)
-    scale = max(float(np.max(np.abs(lam))), float(np.median(ratio)), np.finfo(lam.dtype).tiny)
+    scale = max(float(np.max(np.abs(lam))), float(np.median(diagonal_ratio(A, M))), np.finfo(lam.dtype).tiny)
     worst = float(np.max(res)) / scale
     if not worst <= _DENSE_RESIDUAL * np.sqrt(np.finfo(lam.dtype).eps):
         raise Unreliable(f"the dense solver left a residual of {worst:.1e} of the eigenvalue scale")
