@@ -567,8 +567,9 @@ def main(argv=None) -> list[dict]:
     )
     a = p.parse_args(argv)
     if a.table:
-        results = with_averaged([r for f in a.table for r in json.loads(Path(f).read_text())])
-        print(table(results, list(dict.fromkeys(label(r) for r in results))))
+        results = [r for f in a.table for r in json.loads(Path(f).read_text())]
+        rows = with_averaged(results)
+        print(table(rows, list(dict.fromkeys(label(r) for r in rows))))
         return results
     names = [m for m in a.models.split(",") if m]
     unknown = sorted(set(names) - set(MODELS))
