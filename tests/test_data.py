@@ -212,6 +212,18 @@ def test_cache_version_change_is_rebuilt(cache_setup, caplog, monkeypatch):
     assert any("version" in r.getMessage() for r in caplog.records)
 
 
+def test_cache_entry_of_an_older_computation_is_rebuilt(cache_setup, caplog, monkeypatch):
+    """A fix that changes the operators raises COMPUTATION: entries made before it are not
+    reused, although the package version is the same."""
+    v, f, cache, options = cache_setup
+    cache.get(v, f, **options)
+    monkeypatch.setattr(cache_module, "COMPUTATION", cache_module.COMPUTATION - 1)
+    cache.get(v, f, **options)  # written by the older computation
+    monkeypatch.undo()
+    _rebuilt(cache, v, f, options, caplog)
+    assert any("computation" in r.getMessage() for r in caplog.records)
+
+
 # --------------------------------------------------------------------------- progress
 
 

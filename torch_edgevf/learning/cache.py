@@ -1,7 +1,7 @@
 """An on-disk cache of :class:`~torch_edgevf.learning.precompute.MeshOperators`.
 
-Entries are keyed by the topology, the float64 positions, the options and the package
-version; they are written atomically and verified when read (a corrupt or stale entry is
+Entries are keyed by the topology, the float64 positions, the options, the package
+version and the version of the computation (:data:`COMPUTATION`); they are written atomically and verified when read (a corrupt or stale entry is
 rebuilt, with a logged warning). Never pickled: ``np.savez`` and
 ``np.load(allow_pickle=False)``.
 """
@@ -28,7 +28,14 @@ from .precompute import MeshOperators, compute_operators
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["OperatorCache"]
+__all__ = ["COMPUTATION", "OperatorCache"]
+
+#: The version of what :func:`compute_operators` returns, in the key of every entry: raised
+#: whenever a fix changes the operators of some mesh, so that entries computed before it
+#: are rebuilt even where the package version is unchanged. 2: ``eigsh`` raises where it
+#: returned pairs that are no eigenpairs (a pencil it cannot resolve: a cap face's
+#: cotangent weight of ``1e13``); entries of 1 may hold those pairs.
+COMPUTATION = 2
 
 _SPARSE_FIELDS = ("gradient", "connection_laplacian", "vertex_gradient")
 
@@ -97,9 +104,9 @@ class OperatorCache:
     """On-disk cache of :class:`MeshOperators`.
 
     An entry is keyed by the SHA-256 of the faces (int64 bytes), of the positions
-    (float64 bytes), by the options of :func:`compute_operators` and by the package
-    version. The file name derives from the first three; the full key (with the
-    version) and a SHA-256 of the content are stored inside, and checked when the entry
+    (float64 bytes), by the options of :func:`compute_operators`, by the package
+    version and by :data:`COMPUTATION`. The file name derives from the first three; the
+    full key (with the versions) and a SHA-256 of the content are stored inside, and checked when the entry
     is read, together with the shapes. A file that cannot be read, whose content hash
     or key does not match (another version, a collision), or whose shapes are
     inconsistent is logged as a warning and rebuilt. Files are written to a temporary
@@ -125,6 +132,7 @@ class OperatorCache:
             "verts": _sha256(v),
             "options": {k: options[k] for k in sorted(options)},
             "version": __version__,
+            "computation": COMPUTATION,
         }
 
     def path(self, key: dict) -> Path:
