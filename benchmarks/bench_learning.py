@@ -54,7 +54,7 @@ from torch_edgevf.learning.augment import random_stretch
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.cache import OperatorCache
 from torch_edgevf.learning.datasets import psb_mesh, psb_path
-from torch_edgevf.learning.precompute import heat_kernel_signature
+from torch_edgevf.learning.precompute import compute_operators, heat_kernel_signature
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
 MODELS = {
@@ -161,11 +161,14 @@ def precompute(dataset: dict, cache_dir, vertex_laplacian: str = "cotan") -> tup
         key = cache.key(v, f, **options)
         t = time.perf_counter()
         ops = cache.load(key)
-        if ops is None:
-            ops = cache.get(v, f, **options)
+        if ops is None:  # (not cache.get: that would read a stale entry again)
+            ops = compute_operators(v, f, **options)
+            cache.save(key, ops)
             computed.append(time.perf_counter() - t)
-        x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16)
-        batches.append(MeshBatch.from_operators(ops.to(torch.float32), x.float(), int(label)))
+        x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16).float()
+        if not bool((x > 0).all()):  # at least the constant mode's term: else the eigenpairs are wrong
+            raise ValueError(f"mesh of {len(v)} vertices: heat kernel signatures not all positive")
+        batches.append(MeshBatch.from_operators(ops.to(torch.float32), x, int(label)))
     return batches, (statistics.mean(computed) if computed else float("nan"))
 
 

@@ -280,3 +280,18 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     )
     assert shown[("DiffusionNet (written from the paper)", "DiffusionNet's")] == saved["diffusionnet"]
     assert shown[("`EdgeFieldNet(log_features=True)`", "DiffusionNet's")] == saved["edgefieldnet"]
+
+
+def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path):
+    """Wrong eigenpairs (all eigenvalues large) make the signatures underflow to zero: the
+    mesh is refused with a ValueError, which leaves a stretched copy out, instead of
+    training on zeros."""
+    import torch_edgevf as ev
+
+    v, f = ev.icosphere(2)
+    dataset = {"meshes": [(v.numpy(), f.numpy())], "labels": np.array([0])}
+    assert len(bench.precompute(dataset, tmp_path)[0]) == 1
+    real = bench.heat_kernel_signature
+    monkeypatch.setattr(bench, "heat_kernel_signature", lambda *a, **k: real(*a, **k) * 0)
+    with pytest.raises(ValueError, match="heat kernel signatures not all positive"):
+        bench.precompute(dataset, tmp_path)

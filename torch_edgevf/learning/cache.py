@@ -1,9 +1,9 @@
 """An on-disk cache of :class:`~torch_edgevf.learning.precompute.MeshOperators`.
 
 Entries are keyed by the topology, the float64 positions, the options, the package
-version and the version of the computation (:data:`COMPUTATION`); they are written atomically and verified when read (a corrupt or stale entry is
-rebuilt, with a logged warning). Never pickled: ``np.savez`` and
-``np.load(allow_pickle=False)``.
+version and the version of the computation (:data:`COMPUTATION`); they are written
+atomically and verified when read (a corrupt or stale entry is rebuilt, with a logged
+warning). Never pickled: ``np.savez`` and ``np.load(allow_pickle=False)``.
 """
 
 from __future__ import annotations
