@@ -449,9 +449,12 @@ def with_averaged(results: list[dict]) -> list[dict]:
     return out
 
 
-def table(results: list[dict], models_run) -> str:
+def table(results: list[dict], models_run=None) -> str:
     """Markdown: per model, test accuracy on the fixed split (over seeds), over the folds,
-    and on other splits (``--validation``, ``--split``) where there are any; time; parameters."""
+    and on other splits (``--validation``, ``--split``) where there are any; time; parameters.
+    One row per name in ``models_run`` (default: every :func:`label` of ``results``, in order)."""
+    if models_run is None:
+        models_run = list(dict.fromkeys(label(r) for r in results))
     base = [r["seconds_per_step"] for r in results if r["model"] == "diffusionnet"]
 
     def own(split: str) -> bool:  # --validation or --split, neither the fixed split nor a fold
@@ -571,8 +574,7 @@ def main(argv=None) -> list[dict]:
     a = p.parse_args(argv)
     if a.table:
         results = [r for f in a.table for r in json.loads(Path(f).read_text())]
-        rows = with_averaged(results)
-        print(table(rows, list(dict.fromkeys(label(r) for r in rows))))
+        print(table(with_averaged(results)))
         return results
     names = [m for m in a.models.split(",") if m]
     unknown = sorted(set(names) - set(MODELS))
@@ -664,8 +666,7 @@ def main(argv=None) -> list[dict]:
                 results.append(r)
                 if a.json:
                     Path(a.json).write_text(json.dumps(results, indent=1))
-    rows = with_averaged(results)
-    print(table(rows, list(dict.fromkeys(label(r) for r in rows))))
+    print(table(with_averaged(results)))
     if a.profile:
         for name in names:
             report = profile_step(name, batches[0], len(dataset["classes"]))

@@ -106,8 +106,8 @@ class OperatorCache:
     An entry is keyed by the SHA-256 of the faces (int64 bytes), of the positions
     (float64 bytes), by the options of :func:`compute_operators`, by the package
     version and by :data:`COMPUTATION`. The file name derives from the first three; the
-    full key (with the versions) and a SHA-256 of the content are stored inside, and checked when the entry
-    is read, together with the shapes. A file that cannot be read, whose content hash
+    full key (with the versions) and a SHA-256 of the content are stored inside, and
+    checked when the entry is read, together with the shapes. A file that cannot be read, whose content hash
     or key does not match (another version, a collision), or whose shapes are
     inconsistent is logged as a warning and rebuilt. Files are written to a temporary
     file in the same folder and moved into place with ``os.replace``, so readers never
