@@ -179,7 +179,7 @@ def _rebuilt(cache, v, f, options, caplog):
         finally:
             cache_module.compute_operators = real
     assert calls == [1]
-    assert any("invalid" in r.getMessage() and "rebuilding" in r.getMessage() for r in caplog.records)
+    assert any("invalid" in r.getMessage() and "rebuilt" in r.getMessage() for r in caplog.records)
     return out
 
 
@@ -222,6 +222,31 @@ def test_cache_entry_of_an_older_computation_is_rebuilt(cache_setup, caplog, mon
     monkeypatch.undo()
     _rebuilt(cache, v, f, options, caplog)
     assert any("computation" in r.getMessage() for r in caplog.records)
+
+
+def test_invalid_entry_is_removed_even_when_its_rebuild_fails(cache_setup, caplog, monkeypatch):
+    """An entry that cannot be recomputed any more (a fix made its mesh raise) is not left
+    behind to be read and reported again by every later run."""
+    v, f, cache, options = cache_setup
+    monkeypatch.setattr(cache_module, "COMPUTATION", cache_module.COMPUTATION - 1)
+    cache.get(v, f, **options)
+    monkeypatch.undo()
+    (stale,) = cache.root.iterdir()
+
+    def failing(*args, **kwargs):
+        raise ValueError("eigsh: did not converge")
+
+    monkeypatch.setattr(cache_module, "compute_operators", failing)
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
+        with pytest.raises(ValueError, match="converge"):
+            cache.get(v, f, **options)
+    assert not stale.exists()
+    assert sum("invalid" in r.getMessage() for r in caplog.records) == 1
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
+        with pytest.raises(ValueError, match="converge"):
+            cache.get(v, f, **options)
+    assert not any("invalid" in r.getMessage() for r in caplog.records)
 
 
 # --------------------------------------------------------------------------- progress

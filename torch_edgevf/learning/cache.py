@@ -143,7 +143,7 @@ class OperatorCache:
         )
 
     def load(self, key: dict) -> MeshOperators | None:
-        """The verified entry for ``key``, or None (missing, or invalid: logged)."""
+        """The verified entry for ``key``, or None (missing, or invalid: logged and removed)."""
         path = self.path(key)
         if not path.exists():
             return None
@@ -161,8 +161,11 @@ class OperatorCache:
             out.check()
             return out
         except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
+            # removed, so that an entry whose recomputation fails is not read (and reported)
+            # again by every later run
+            path.unlink(missing_ok=True)
             logger.warning(
-                "operator cache entry %s is invalid (%s: %s); rebuilding it",
+                "operator cache entry %s is invalid (%s: %s); removed it, to be rebuilt",
                 path.name,
                 type(exc).__name__,
                 exc,
