@@ -2,6 +2,7 @@
 
 import importlib.util
 import json
+import statistics
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -280,6 +281,39 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     )
     assert shown[("DiffusionNet (written from the paper)", "DiffusionNet's")] == saved["diffusionnet"]
     assert shown[("`EdgeFieldNet(log_features=True)`", "DiffusionNet's")] == saved["edgefieldnet"]
+
+    def folds(name: str, seed: int) -> str:  # mean ± std over the 5 folds of one seed
+        xs = [
+            r["test_accuracy"]
+            for r in runs
+            if bench.label(r) == name and r["split"].startswith("fold") and r["seed"] == seed
+        ]
+        assert len(xs) == 5, (name, seed, len(xs))
+        return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
+
+    cross = {key: line.split(" | ")[3] for key, line in _rows(section).items()}
+    assert cross[("`EdgeFieldNet(log_features=True)`", recipe)] == (
+        f"{folds('edgefieldnet, 4 stretched copies, averaged last 10', 0)}; "
+        f"seed 1: {folds('edgefieldnet, 4 stretched copies, averaged last 10', 1)}"
+    )
+    assert cross[("DiffusionNet (written from the paper)", recipe)] == folds(
+        "diffusionnet, 4 stretched copies, averaged last 10", 0
+    )
+    for model, name in (
+        ("DiffusionNet (written from the paper)", "diffusionnet"),
+        ("`EdgeFieldNet(log_features=True)`", "edgefieldnet"),
+    ):
+        assert cross[(model, "DiffusionNet's")] == f"{folds(name, 0)}; seed 1: {folds(name, 1)}"
+
+
+def _rows(section: str) -> dict:
+    """The rows of a Markdown table by their first two cells (model, recipe)."""
+    out = {}
+    for line in section.splitlines():
+        if line.startswith("| ") and not line.startswith("| model"):
+            cells = [c.strip().strip("*") for c in line.strip("|").split("|")]
+            out[(cells[0], cells[1])] = line.strip("|").replace("**", "")
+    return out
 
 
 def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path):
