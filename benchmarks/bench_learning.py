@@ -161,7 +161,7 @@ def precompute(dataset: dict, cache_dir, vertex_laplacian: str = "cotan") -> tup
         key = cache.key(v, f, **options)
         t = time.perf_counter()
         ops = cache.load(key)
-        if ops is None:  # (not cache.get: that would read a stale entry again)
+        if ops is None:  # (not cache.get: only the meshes computed here are timed)
             ops = compute_operators(v, f, **options)
             cache.save(key, ops)
             computed.append(time.perf_counter() - t)

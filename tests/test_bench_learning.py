@@ -256,20 +256,22 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
 
 
 def test_readme_learning_table_is_that_of_the_saved_runs(bench):
-    """The README's fixed-split cells are those `--table` gives for the saved runs."""
+    """The README's fixed-split cells are those `--table` gives for the saved runs, and its
+    cross-validation cells the mean and deviation of each seed's saved fold runs."""
     root = BENCH.parents[1]
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
     saved = {}
-    for line in bench.table(runs, list(dict.fromkeys(bench.label(r) for r in runs))).splitlines()[2:]:
+    for line in bench.table(runs).splitlines()[2:]:
         cells = [c.strip() for c in line.strip("|").split("|")]
         saved[cells[0]] = cells[1].split(" (n=")[0]
     readme = (root / "README.md").read_text()
     section = readme[readme.index("### Learning") : readme.index("### Real meshes")]
-    shown = {}
+    rows = {}  # (model, recipe): the row's cells
     for line in section.splitlines():
         if line.startswith("| ") and not line.startswith("| model"):
             cells = [c.strip().strip("*") for c in line.strip("|").split("|")]
-            shown[(cells[0], cells[1])] = cells[2]
+            rows[(cells[0], cells[1])] = cells
+    shown = {key: cells[2] for key, cells in rows.items()}  # fixed split
     recipe = "stretched copies, averaged weights"
     assert (
         shown[("`EdgeFieldNet(log_features=True)`", recipe)]
@@ -291,7 +293,7 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         assert len(xs) == 5, (name, seed, len(xs))
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
-    cross = {key: line.split(" | ")[3] for key, line in _rows(section).items()}
+    cross = {key: cells[3] for key, cells in rows.items()}  # cross-validation
     assert cross[("`EdgeFieldNet(log_features=True)`", recipe)] == (
         f"{folds('edgefieldnet, 4 stretched copies, averaged last 10', 0)}; "
         f"seed 1: {folds('edgefieldnet, 4 stretched copies, averaged last 10', 1)}"
@@ -304,16 +306,6 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         ("`EdgeFieldNet(log_features=True)`", "edgefieldnet"),
     ):
         assert cross[(model, "DiffusionNet's")] == f"{folds(name, 0)}; seed 1: {folds(name, 1)}"
-
-
-def _rows(section: str) -> dict:
-    """The rows of a Markdown table by their first two cells (model, recipe)."""
-    out = {}
-    for line in section.splitlines():
-        if line.startswith("| ") and not line.startswith("| model"):
-            cells = [c.strip().strip("*") for c in line.strip("|").split("|")]
-            out[(cells[0], cells[1])] = line.strip("|").replace("**", "")
-    return out
 
 
 def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path):

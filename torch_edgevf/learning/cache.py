@@ -107,11 +107,12 @@ class OperatorCache:
     (float64 bytes), by the options of :func:`compute_operators`, by the package
     version and by :data:`COMPUTATION`. The file name derives from the first three; the
     full key (with the versions) and a SHA-256 of the content are stored inside, and
-    checked when the entry is read, together with the shapes. A file that cannot be read, whose content hash
-    or key does not match (another version, a collision), or whose shapes are
-    inconsistent is logged as a warning and rebuilt. Files are written to a temporary
-    file in the same folder and moved into place with ``os.replace``, so readers never
-    see half-written entries. Pickle is never used.
+    checked when the entry is read, together with the shapes. A file that cannot be
+    read, whose content hash or key does not match (another version, a collision), or
+    whose shapes are inconsistent is logged as a warning, removed and rebuilt (so that
+    an entry whose recomputation raises is not read again). Files are written to a
+    temporary file in the same folder and moved into place with ``os.replace``, so
+    readers never see half-written entries. Pickle is never used.
 
     Parameters
     ----------
@@ -161,8 +162,6 @@ class OperatorCache:
             out.check()
             return out
         except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
-            # removed, so that an entry whose recomputation fails is not read (and reported)
-            # again by every later run
             path.unlink(missing_ok=True)
             logger.warning(
                 "operator cache entry %s is invalid (%s: %s); removed it, to be rebuilt",
