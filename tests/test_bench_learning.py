@@ -34,6 +34,7 @@ def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
         assert 0 <= r["test_accuracy"] <= 1 and r["train_seconds"] > 0 and r["parameters"] > 10_000
     printed = capsys.readouterr().out
     assert "| edgefieldnet |" in printed and "| diffusionnet |" in printed
+    assert "operators: 32 meshes, 32 computed" in printed
     assert bench.main(["--table", str(out)]) == saved
 
 
@@ -321,3 +322,13 @@ def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path)
     monkeypatch.setattr(bench, "heat_kernel_signature", lambda *a, **k: real(*a, **k) * 0)
     with pytest.raises(ValueError, match="heat kernel signatures not all positive"):
         bench.precompute(dataset, tmp_path)
+
+
+def test_precompute_times_only_the_meshes_it_computes(bench, tmp_path):
+    import torch_edgevf as ev
+
+    v, f = ev.icosphere(2)
+    dataset = {"meshes": [(v.numpy(), f.numpy())] * 2, "labels": np.array([0, 1])}
+    batches, computed = bench.precompute(dataset, tmp_path)
+    assert len(batches) == 2 and len(computed) == 1 and computed[0] > 0  # the second is cached
+    assert bench.precompute(dataset, tmp_path)[1] == []
