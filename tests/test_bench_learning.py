@@ -256,57 +256,78 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
     assert bench.precompute_copies(dataset, None, 0, np.ones(3, bool)) == [[], [], []]
 
 
+#: the README's learning rows, (model, recipe), and the :func:`label` of their runs
+README_ROWS = {
+    ("`EdgeFieldNet(log_features=True)`", "copies"): "edgefieldnet",
+    ("DiffusionNet (written from the paper)", "copies"): "diffusionnet",
+    ("DiffusionNet (written from the paper)", "DiffusionNet's"): "diffusionnet",
+    ("`EdgeFieldNet(log_features=True)`", "DiffusionNet's"): "edgefieldnet",
+    ('ablation: without the vector stream (`vector="none"`)', "copies"): "edgefieldnet-scalar",
+    ('ablation: vertex gradients instead of edge fields (`vector="vertex"`)', "copies"): (
+        "edgefieldnet-vertexvec"
+    ),
+    ("ablation: diffusion times not learned (`learn_times=False`)", "copies"): "edgefieldnet-fixedtime",
+    ('ablation: without the vector stream (`vector="none"`)', "DiffusionNet's"): "edgefieldnet-scalar",
+    ('ablation: vertex gradients instead of edge fields (`vector="vertex"`)', "DiffusionNet's"): (
+        "edgefieldnet-vertexvec"
+    ),
+    ("ablation: diffusion times not learned (`learn_times=False`)", "DiffusionNet's"): (
+        "edgefieldnet-fixedtime"
+    ),
+    ('ablation: DiffusionNet\'s input and readout (`pool="mean"`, raw HKS)', "DiffusionNet's"): (
+        "edgefieldnet-rawmean"
+    ),
+    ("DiffusionNet with log-HKS and the mean and deviation readout", "DiffusionNet's"): "diffusionnet-logstd",
+}
+
+
 def test_readme_learning_table_is_that_of_the_saved_runs(bench):
-    """The README's fixed-split cells are those `--table` gives for the saved runs, and its
-    cross-validation cells the mean and deviation of each seed's saved fold runs."""
+    """Every cell of the README's learning table comes from the saved runs: the fixed split's
+    mean and deviation over seeds, each seed's mean and deviation over the 5 folds (every
+    seed whose 5 folds were run), "not run" where there are none, and the parameters."""
     root = BENCH.parents[1]
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    saved = {}
-    for line in bench.table(runs).splitlines()[2:]:
-        cells = [c.strip() for c in line.strip("|").split("|")]
-        saved[cells[0]] = cells[1].split(" (n=")[0]
     readme = (root / "README.md").read_text()
     section = readme[readme.index("### Learning") : readme.index("### Real meshes")]
-    rows = {}  # (model, recipe): the row's cells
-    for line in section.splitlines():
-        if line.startswith("| ") and not line.startswith("| model"):
-            cells = [c.strip().strip("*") for c in line.strip("|").split("|")]
-            rows[(cells[0], cells[1])] = cells
-    shown = {key: cells[2] for key, cells in rows.items()}  # fixed split
-    recipe = "stretched copies, averaged weights"
-    assert (
-        shown[("`EdgeFieldNet(log_features=True)`", recipe)]
-        == saved["edgefieldnet, 4 stretched copies, averaged last 10"]
-    )
-    assert (
-        shown[("DiffusionNet (written from the paper)", recipe)]
-        == saved["diffusionnet, 4 stretched copies, averaged last 10"]
-    )
-    assert shown[("DiffusionNet (written from the paper)", "DiffusionNet's")] == saved["diffusionnet"]
-    assert shown[("`EdgeFieldNet(log_features=True)`", "DiffusionNet's")] == saved["edgefieldnet"]
+    rows = [
+        [c.strip().strip("*") for c in line.strip("|").split("|")]
+        for line in section.splitlines()
+        if line.startswith("| ") and not line.startswith("| model")
+    ]
+    assert len(rows) == len(README_ROWS)
 
-    def folds(name: str, seed: int) -> str:  # mean ± std over the 5 folds of one seed
-        xs = [
-            r["test_accuracy"]
-            for r in runs
-            if bench.label(r) == name and r["split"].startswith("fold") and r["seed"] == seed
-        ]
-        assert len(xs) == 5, (name, seed, len(xs))
+    def mean_std(xs: list[float]) -> str:
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
-    cross = {key: cells[3] for key, cells in rows.items()}  # cross-validation
-    assert cross[("`EdgeFieldNet(log_features=True)`", recipe)] == (
-        f"{folds('edgefieldnet, 4 stretched copies, averaged last 10', 0)}; "
-        f"seed 1: {folds('edgefieldnet, 4 stretched copies, averaged last 10', 1)}"
-    )
-    assert cross[("DiffusionNet (written from the paper)", recipe)] == folds(
-        "diffusionnet, 4 stretched copies, averaged last 10", 0
-    )
-    for model, name in (
-        ("DiffusionNet (written from the paper)", "diffusionnet"),
-        ("`EdgeFieldNet(log_features=True)`", "edgefieldnet"),
-    ):
-        assert cross[(model, "DiffusionNet's")] == f"{folds(name, 0)}; seed 1: {folds(name, 1)}"
+    for model, recipe, fixed_cell, cross_cell, _, parameters in rows:
+        copies = recipe == "stretched copies, averaged weights"
+        assert copies or recipe == "DiffusionNet's", recipe
+        name = README_ROWS[(model, "copies" if copies else recipe)]
+        name += ", 4 stretched copies, averaged last 10" if copies else ""
+        mine = [r for r in runs if bench.label(r) == name]
+        fixed = [r["test_accuracy"] for r in mine if r["split"] == "fixed"]
+        if fixed_cell == "not run":
+            assert not fixed, name
+        elif fixed_cell.endswith("(one seed)"):
+            assert fixed_cell == f"{fixed[0]:.3f} (one seed)" and len(fixed) == 1, name
+        else:
+            assert fixed_cell == mean_std(fixed) and len(fixed) == 3, name
+        folds = {}  # seed: accuracies over the folds
+        for r in mine:
+            if r["split"].startswith("fold"):
+                folds.setdefault(r["seed"], []).append(r["test_accuracy"])
+        complete = [
+            mean_std(xs) if seed == 0 else f"seed {seed}: {mean_std(xs)}"
+            for seed, xs in sorted(folds.items())
+            if len(xs) == 5
+        ]
+        if cross_cell == "not run":
+            assert not folds, name
+        elif cross_cell.endswith("(fold 0 only)"):
+            assert cross_cell == f"{folds[0][0]:.3f} (fold 0 only)" and len(folds[0]) == 1, name
+        else:
+            assert cross_cell.split("; ") == complete, name
+        assert {f"{r['parameters']:,}" for r in mine} == {parameters}, name
 
 
 def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path):
