@@ -164,12 +164,10 @@ def precompute(
     batches, computed = [], []
     for (v, f), label in zip(dataset["meshes"], dataset["labels"]):
         v, f = without_degenerate_faces(v, f)
-        key = cache.key(v, f, **options)
-        t = time.perf_counter()
-        ops = cache.load(key)
-        if ops is None:  # (not cache.get: only the meshes computed here are timed)
-            ops = compute_operators(v, f, **options)
-            cache.save(key, ops)
+        ops = cache.load(cache.key(v, f, **options))
+        if ops is None:  # computed here, and timed (a mesh that failed before raises at once)
+            t = time.perf_counter()
+            ops = cache.get(v, f, **options)
             computed.append(time.perf_counter() - t)
         x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16).float()
         if not bool((x > 0).all()):  # at least the constant mode's term: else the eigenpairs are wrong
@@ -193,7 +191,7 @@ def precompute_copies(
 
     A copy whose operators cannot be computed (a stretch can turn a nearly degenerate face
     into one whose eigenpairs are lost to rounding: ``ValueError``) is left out, and
-    reported.
+    reported; the cache records the failure, so later runs leave it out at once.
     """
     out: list[list[MeshBatch]] = [[] for _ in dataset["labels"]]
     dropped = []
@@ -399,8 +397,6 @@ def precompute_times(
     """
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_peers
-
-    from torch_edgevf.learning.precompute import compute_operators
 
     if bench_peers._peer("robust_laplacian") is None:
         raise SystemExit("--precompute-time needs robust_laplacian (benchmarks/requirements-peers.txt)")

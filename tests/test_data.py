@@ -383,3 +383,51 @@ def test_robust_laplacian_missing_is_named(monkeypatch):
     v, f = ev.icosphere(1)
     with pytest.raises(ValueError, match="pip install robust_laplacian"):
         data.compute_operators(v, f, k_edge=4, k_vertex=4, vertex_laplacian="robust")
+
+
+def test_a_mesh_whose_operators_raise_is_refused_at_once_the_next_time(cache_setup, monkeypatch, caplog):
+    """A ValueError of the computation is recorded: the same mesh and options raise it again
+    without computing, until the record is removed or belongs to another computation."""
+    v, f, cache, options = cache_setup
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        raise ValueError("eigsh: Lanczos did not converge in 1000 restarts")
+
+    monkeypatch.setattr(cache_module, "compute_operators", failing)
+    with pytest.raises(ValueError, match="did not converge"):
+        cache.get(v, f, **options)
+    record = cache.failure_path(cache.key(v, f, **options))
+    assert record.exists() and calls == [1]
+    with pytest.raises(
+        ValueError, match="did not converge.*recorded in the operator cache.*remove that file"
+    ):
+        cache.get(v, f, **options)
+    assert calls == [1]  # not computed again
+    with pytest.raises(ValueError):  # other options: another key, computed
+        cache.get(v, f, k_edge=5, k_vertex=3)
+    assert calls == [1, 1]
+    # a record of another computation does not apply: removed, and the mesh computed again
+    monkeypatch.setattr(cache_module, "COMPUTATION", cache_module.COMPUTATION + 1)
+    monkeypatch.setattr(cache_module, "compute_operators", data.compute_operators)
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
+        ops = cache.get(v, f, **options)
+    assert ops.edges.shape[0] > 0 and not record.exists()
+    assert any("does not apply" in r.getMessage() for r in caplog.records)
+    # an entry written after a failure replaces the failure's record
+    monkeypatch.undo()
+    cache.record_failure(cache.key(v, f, **options), ValueError("x"))
+    cache.save(cache.key(v, f, **options), ops)
+    assert cache.failure(cache.key(v, f, **options)) is None
+    _equal(cache.get(v, f, **options), ops)
+
+
+def test_an_unreadable_failure_record_is_removed(cache_setup, caplog):
+    v, f, cache, options = cache_setup
+    key = cache.key(v, f, **options)
+    cache.failure_path(key).write_text("{not json")
+    with caplog.at_level(logging.WARNING, logger="torch_edgevf.learning"):
+        assert cache.failure(key) is None
+    assert not cache.failure_path(key).exists()
+    assert any("does not apply" in r.getMessage() for r in caplog.records)

@@ -3,7 +3,9 @@
 Entries are keyed by the topology, the float64 positions, the options, the package
 version and the version of the computation (:data:`COMPUTATION`); they are written
 atomically and verified when read (a corrupt or stale entry is rebuilt, with a logged
-warning). Never pickled: ``np.savez`` and ``np.load(allow_pickle=False)``.
+warning). A mesh whose operators raise ``ValueError`` is recorded as such, so that it is
+refused at once the next time instead of being computed again. Never pickled:
+``np.savez``, ``np.load(allow_pickle=False)`` and JSON.
 """
 
 from __future__ import annotations
@@ -114,6 +116,13 @@ class OperatorCache:
     temporary file in the same folder and moved into place with ``os.replace``, so
     readers never see half-written entries. Pickle is never used.
 
+    A ``ValueError`` of :func:`compute_operators` in :meth:`get` (a mesh that cannot be
+    handled, an eigenproblem that ``eigsh`` refuses) is recorded next to where the entry
+    would be (``.failed.json``, with the full key), and later calls with the same key raise
+    it again without computing; the message names the record, whose removal makes the
+    next call try again. A record of another package version or computation is removed
+    and the mesh computed again. See :meth:`failure` and :meth:`record_failure`.
+
     Parameters
     ----------
     root : path, created if needed.
@@ -172,28 +181,77 @@ class OperatorCache:
             return None
 
     def save(self, key: dict, operators: MeshOperators) -> Path:
-        """Write an entry atomically; returns its path."""
+        """Write an entry atomically (removing a failure recorded for ``key``); returns its path."""
         arrays = _to_arrays(operators)
         arrays["__hash__"] = np.asarray(_content_hash(arrays))
         arrays["__key__"] = np.asarray(json.dumps(key, sort_keys=True))
         path = self.path(key)
+        self._write(path, lambda fh: np.savez(fh, **arrays))
+        self.failure_path(key).unlink(missing_ok=True)
+        return path
+
+    def _write(self, path: Path, write) -> None:
         fd, tmp = tempfile.mkstemp(dir=self.root, prefix=path.stem, suffix=".tmp")
         try:
             with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
+                write(fh)
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, path)
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
+
+    def failure_path(self, key: dict) -> Path:
+        """File of the failure recorded for ``key`` (beside :meth:`path`)."""
+        return self.path(key).with_suffix(".failed.json")
+
+    def record_failure(self, key: dict, error: BaseException) -> Path:
+        """Record that the operators of ``key`` raised ``error``; returns the record's path."""
+        record = json.dumps({"key": key, "error": f"{type(error).__name__}: {error}"}, sort_keys=True)
+        path = self.failure_path(key)
+        self._write(path, lambda fh: fh.write(record.encode()))
         return path
 
+    def failure(self, key: dict) -> str | None:
+        """The error recorded for ``key``, or None (none, or one of another version or
+        computation, or unreadable: then removed, with a logged warning)."""
+        path = self.failure_path(key)
+        if not path.exists():
+            return None
+        try:
+            record = json.loads(path.read_text())
+            if record["key"] == key:
+                return str(record["error"])
+            other = record["key"]
+            reason = (
+                f"another key: version {other.get('version')!r}, computation {other.get('computation')!r}"
+            )
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            reason = f"{type(exc).__name__}: {exc}"
+        path.unlink(missing_ok=True)
+        logger.warning("operator cache failure record %s does not apply (%s); removed it", path.name, reason)
+        return None
+
     def get(self, verts, faces, **options) -> MeshOperators:
-        """Load the entry of a mesh, or compute (:func:`compute_operators`) and store it."""
+        """Load the entry of a mesh, or compute (:func:`compute_operators`) and store it.
+
+        Raises the recorded ``ValueError`` at once for a mesh whose operators raised before
+        (see the class docstring), and records a new one.
+        """
         key = self.key(verts, faces, **options)
         out = self.load(key)
         if out is None:
-            out = compute_operators(verts, faces, **options)
+            recorded = self.failure(key)
+            if recorded is not None:
+                raise ValueError(
+                    f"{recorded} (recorded in the operator cache: {self.failure_path(key)}; "
+                    "remove that file to compute again)"
+                )
+            try:
+                out = compute_operators(verts, faces, **options)
+            except ValueError as exc:
+                self.record_failure(key, exc)
+                raise
             self.save(key, out)
         return out
