@@ -208,7 +208,7 @@ class OperatorCache:
 
     def record_failure(self, key: dict, error: BaseException) -> Path:
         """Record that the operators of ``key`` raised ``error``; returns the record's path."""
-        record = json.dumps({"key": key, "error": f"{type(error).__name__}: {error}"}, sort_keys=True)
+        record = json.dumps({"key": key, "error": str(error), "type": type(error).__name__}, sort_keys=True)
         path = self.failure_path(key)
         self._write(path, lambda fh: fh.write(record.encode()))
         return path
