@@ -247,7 +247,7 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
         (w, _), label = one["meshes"][0], int(one["labels"][0])
         if label == 1 and np.allclose(w, bench.stretched(v + 1, 1, 0)):
             raise ValueError("eigsh: Lanczos did not converge")
-        return [SimpleNamespace(labels=label)], float("nan")
+        return [SimpleNamespace(labels=label)], []
 
     monkeypatch.setattr(bench, "precompute", fake_precompute)
     out = bench.precompute_copies(dataset, None, 2, np.array([True, True, False]))
