@@ -286,6 +286,19 @@ def accuracy(model, batches) -> float:
     return correct / max(len(batches), 1)
 
 
+@torch.no_grad()
+def tta_accuracy(model, batches, copies) -> float:
+    """Accuracy of the class probabilities averaged over each mesh and its ``copies``
+    (test-time augmentation with the stretched copies of :func:`precompute_copies`)."""
+    model.eval()
+    correct = 0
+    for b, others in zip(batches, copies):
+        p = sum(torch.softmax(model(x)[0], dim=-1) for x in [b, *others])
+        correct += int(p.argmax().item() == int(b.labels))
+    model.train()
+    return correct / max(len(batches), 1)
+
+
 def fit(
     name: str,
     train_set,
@@ -331,10 +344,13 @@ def train(
     num_classes: int,
     average: int = AVERAGE_EPOCHS,
     copies: list | None = None,
+    test_copies: list | None = None,
 ) -> dict:
     """The record of one run: accuracies after the final epoch and, with ``average``, those
     of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`).
-    Training accuracy is that on ``train_set`` (without the copies)."""
+    Training accuracy is that on ``train_set`` (without the copies). With ``test_copies``
+    (per test mesh, its stretched copies), also the accuracies of the probabilities
+    averaged over each test mesh and its copies (:func:`tta_accuracy`)."""
     model, averaged, seconds = fit(name, train_set, seed, epochs, num_classes, average, copies)
     out = {
         "model": name,
@@ -351,6 +367,10 @@ def train(
             averaged_test_accuracy=accuracy(averaged.module, test_set),
             averaged_train_accuracy=accuracy(averaged.module, train_set),
         )
+    if test_copies is not None:
+        out["tta_test_accuracy"] = tta_accuracy(model, test_set, test_copies)
+        if averaged is not None:
+            out["averaged_tta_test_accuracy"] = tta_accuracy(averaged.module, test_set, test_copies)
     return out
 
 
@@ -532,6 +552,14 @@ def main(argv=None) -> list[dict]:
         help=f"K stretched copies of each training mesh (random stretch up to {STRETCH}, operators cached); "
         "each step takes the mesh or one of its copies",
     )
+    p.add_argument(
+        "--tta",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also report the accuracy of the class probabilities averaged over each test mesh and "
+        "K stretched copies of it (test-time augmentation)",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--vertex-laplacian",
@@ -586,6 +614,8 @@ def main(argv=None) -> list[dict]:
         p.error("--rounds must be at least 1")
     if a.augment < 0:
         p.error("--augment must be 0 (off) or a number of copies")
+    if a.tta < 0:
+        p.error("--tta must be 0 (off) or a number of copies")
     if a.average < 0:
         p.error("--average must be 0 (off) or a number of epochs")
     if a.folds == 1 or a.folds < 0:
@@ -644,10 +674,14 @@ def main(argv=None) -> list[dict]:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
     copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian)
+    if a.tta:
+        tested = np.any([m for _, _, m in evaluations], axis=0)
+        tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]
         test_set = [b for b, t in zip(batches, test_mask) if t]
+        test_copies = [c for c, t in zip(tta_copies, test_mask) if t] if a.tta else None
         for seed in [int(s) for s in a.seeds.split(",")]:
             for name in names:
                 r = train(
@@ -659,10 +693,13 @@ def main(argv=None) -> list[dict]:
                     len(dataset["classes"]),
                     a.average,
                     train_copies,
+                    test_copies,
                 )
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
                 if a.augment:
                     r["augment"] = a.augment
+                if a.tta:
+                    r["tta"] = a.tta
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
                 print(json.dumps(r), flush=True)

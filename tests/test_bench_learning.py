@@ -89,6 +89,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--rounds", "0"], "--rounds must be at least 1"),
         (["--average", "-1"], "--average must be 0"),
         (["--augment", "-1"], "--augment must be 0"),
+        (["--tta", "-1"], "--tta must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -200,6 +201,55 @@ def test_run_records_and_table_rows_of_averaged_weights(bench, monkeypatch):
     lines = bench.table(rows, [bench.label(x) for x in rows]).splitlines()
     assert lines[2].startswith("| toy | 0.250 ± 0.000 (n=1)")
     assert lines[3].startswith("| toy, averaged last 4 | 0.750 ± 0.000 (n=1)")
+
+
+class _Logits(torch.nn.Module):
+    """A stand-in model whose logits are each mesh's mean feature; it records its mode."""
+
+    def __init__(self):
+        super().__init__()
+        self.modes = []
+
+    def forward(self, batch):
+        self.modes.append(self.training)
+        return batch.features.mean(0, keepdim=True)
+
+
+def _logits(values, label):
+    return SimpleNamespace(features=torch.tensor([values]), labels=torch.tensor(label))
+
+
+def test_test_time_augmentation_averages_the_probabilities_of_a_mesh_and_its_copies(bench):
+    model = _Logits()
+    # mesh 0 (class 0) is misread alone, and read right with its two copies; mesh 1 is read
+    # right alone and misread with its copies; mesh 2 has no copies
+    meshes = [_logits([0.0, 0.2], 0), _logits([0.0, 0.1], 1), _logits([1.0, 0.0], 0)]
+    copies = [
+        [_logits([3.0, 0.0], 0), _logits([2.0, 0.0], 0)],
+        [_logits([0.0, -2.0], 1), _logits([0.0, -2.0], 1)],
+        [],
+    ]
+    assert bench.accuracy(model, meshes) == pytest.approx(2 / 3)
+    assert bench.tta_accuracy(model, meshes, copies) == pytest.approx(2 / 3)
+    assert bench.tta_accuracy(model, meshes, [copies[0], [], []]) == 1.0
+    # probabilities are averaged, not logits: one confident copy does not outvote two others
+    # (the mean logits would read mesh 0 right: 2.25 against 1.55)
+    votes = [[_logits([9.0, 0.0], 0), _logits([0.0, 3.0], 0), _logits([0.0, 3.0], 0)], [], []]
+    assert bench.tta_accuracy(model, meshes, votes) == pytest.approx(2 / 3)
+    assert not any(model.modes) and model.training  # evaluated in eval mode, then back to training
+
+
+def test_run_records_of_test_time_augmentation(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches()
+    test_copies = [[batches[j] for j in (0, 1)] for _ in batches[9:]]
+    r = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=2, test_copies=test_copies)
+    assert 0 <= r["tta_test_accuracy"] <= 1 and 0 <= r["averaged_tta_test_accuracy"] <= 1
+    plain = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=2)
+    assert "tta_test_accuracy" not in plain
+    assert plain["test_accuracy"] == r["test_accuracy"]  # the run itself is the one it was
+    same = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, test_copies=[[]] * 3)
+    assert same["tta_test_accuracy"] == same["test_accuracy"] and "averaged_tta_test_accuracy" not in same
 
 
 def test_stretched_copies_are_reproducible_non_rigid_and_normalised(bench):
