@@ -18,9 +18,11 @@ selection on the test set); each run also reports that of its weights averaged o
 last ``--average`` epochs (default 10, the epochs after the rate is halved).
 
 ``--augment K`` gives every model in the run the same K stretched copies of each training
-mesh (a random anisotropic stretch by factors up to 1.25, the copy re-centred and scaled to
-the unit sphere as the dataset's meshes are; operators cached); each step takes the mesh or
-one of its copies, so a run takes as many steps as without them.
+mesh (a random anisotropic stretch by factors up to 1.25, or ``--stretch S``, the copy
+re-centred and scaled to the unit sphere as the dataset's meshes are; operators cached);
+each step takes the mesh or one of its copies, so a run takes as many steps as without
+them. ``--tta K`` also reports the accuracy of the class probabilities averaged over each
+test mesh and K stretched copies of it.
 
 ``--data`` (or ``$TORCH_EDGEVF_PSB``) is the ``psb_watertight_2k.npz`` file (see the
 README for how to build it); operators are cached on disk in ``--cache`` (default
@@ -184,10 +186,16 @@ def stretched(v: np.ndarray, index: int, copy: int, spread: float = STRETCH) -> 
 
 
 def precompute_copies(
-    dataset: dict, cache_dir, copies: int, keep: np.ndarray, vertex_laplacian: str = "cotan"
+    dataset: dict,
+    cache_dir,
+    copies: int,
+    keep: np.ndarray,
+    vertex_laplacian: str = "cotan",
+    spread: float = STRETCH,
 ) -> list[list[MeshBatch]]:
-    """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`; none for
-    meshes where ``keep`` is False), with their operators cached like the meshes'.
+    """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`, by
+    factors up to ``spread``; none for meshes where ``keep`` is False), with their
+    operators cached like the meshes'.
 
     A copy whose operators cannot be computed (a stretch can turn a nearly degenerate face
     into one whose eigenpairs are lost to rounding: ``ValueError``) is left out, and
@@ -198,7 +206,7 @@ def precompute_copies(
     for i in np.flatnonzero(keep) if copies else []:
         v, f = dataset["meshes"][i]
         for c in range(copies):
-            one = {"meshes": [(stretched(v, int(i), c), f)], "labels": dataset["labels"][i : i + 1]}
+            one = {"meshes": [(stretched(v, int(i), c, spread), f)], "labels": dataset["labels"][i : i + 1]}
             try:
                 out[i] += precompute(one, cache_dir, vertex_laplacian)[0]
             except ValueError as e:
@@ -451,6 +459,8 @@ def label(r: dict) -> str:
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
     if r.get("augment"):
         name += f", {r['augment']} stretched copies"
+        if r.get("stretch", STRETCH) != STRETCH:
+            name += f" (up to {r['stretch']:g})"
     return f"{name}, averaged last {r['average_epochs']}" if r.get("averaged") else name
 
 
@@ -549,8 +559,15 @@ def main(argv=None) -> list[dict]:
         type=int,
         default=0,
         metavar="K",
-        help=f"K stretched copies of each training mesh (random stretch up to {STRETCH}, operators cached); "
+        help="K stretched copies of each training mesh (random stretch, see --stretch; operators cached); "
         "each step takes the mesh or one of its copies",
+    )
+    p.add_argument(
+        "--stretch",
+        type=float,
+        default=STRETCH,
+        metavar="S",
+        help=f"largest stretch factor of the copies of --augment and --tta (default {STRETCH})",
     )
     p.add_argument(
         "--tta",
@@ -614,6 +631,8 @@ def main(argv=None) -> list[dict]:
         p.error("--rounds must be at least 1")
     if a.augment < 0:
         p.error("--augment must be 0 (off) or a number of copies")
+    if not a.stretch >= 1:
+        p.error("--stretch must be at least 1")
     if a.tta < 0:
         p.error("--tta must be 0 (off) or a number of copies")
     if a.average < 0:
@@ -673,10 +692,10 @@ def main(argv=None) -> list[dict]:
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
-    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian)
+    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian, a.stretch)
     if a.tta:
         tested = np.any([m for _, _, m in evaluations], axis=0)
-        tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian)
+        tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]
@@ -700,6 +719,8 @@ def main(argv=None) -> list[dict]:
                     r["augment"] = a.augment
                 if a.tta:
                     r["tta"] = a.tta
+                if (a.augment or a.tta) and a.stretch != STRETCH:
+                    r["stretch"] = a.stretch
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
                 print(json.dumps(r), flush=True)

@@ -90,6 +90,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--average", "-1"], "--average must be 0"),
         (["--augment", "-1"], "--augment must be 0"),
         (["--tta", "-1"], "--tta must be 0"),
+        (["--stretch", "0.8"], "--stretch must be at least 1"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -304,6 +305,24 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
     assert [len(c) for c in out] == [2, 1, 0] and all(b.labels == 1 for b in out[1])
     assert "left out 1 copies: mesh 1 copy 0: eigsh: Lanczos did not converge" in capsys.readouterr().out
     assert bench.precompute_copies(dataset, None, 0, np.ones(3, bool)) == [[], [], []]
+
+
+def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
+    v = np.random.default_rng(2).standard_normal((40, 3))
+    dataset = {"meshes": [(v, None)], "labels": np.array([0])}
+    seen = []
+    monkeypatch.setattr(
+        bench, "precompute", lambda one, *a: (seen.append(one["meshes"][0][0]), ([None], []))[1]
+    )
+    bench.precompute_copies(dataset, None, 1, np.array([True]))
+    bench.precompute_copies(dataset, None, 1, np.array([True]), spread=1.5)
+    np.testing.assert_array_equal(seen[0], bench.stretched(v, 0, 0))
+    np.testing.assert_array_equal(seen[1], bench.stretched(v, 0, 0, 1.5))
+    assert not np.allclose(seen[0], seen[1])
+    run = {"model": "edgefieldnet", "augment": 4}
+    assert bench.label(run) == "edgefieldnet, 4 stretched copies"
+    assert bench.label(dict(run, stretch=bench.STRETCH)) == "edgefieldnet, 4 stretched copies"
+    assert bench.label(dict(run, stretch=1.5)) == "edgefieldnet, 4 stretched copies (up to 1.5)"
 
 
 #: the README's learning rows, (model, recipe), and the :func:`label` of their runs
