@@ -325,7 +325,15 @@ def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
     assert bench.label(dict(run, stretch=1.5)) == "edgefieldnet, 4 stretched copies (up to 1.5)"
 
 
-#: the README's learning rows, (model, recipe), and the :func:`label` of their runs
+#: the README's recipes, and what they add to the :func:`label` of a run
+README_RECIPES = {
+    "DiffusionNet's": "",
+    "stretched copies, averaged weights": ", 4 stretched copies, averaged last 10",
+    "stretched copies up to 1.25, averaged weights": ", 4 stretched copies, averaged last 10",
+    "stretched copies up to 1.5, averaged weights": ", 4 stretched copies (up to 1.5), averaged last 10",
+}
+#: the README's learning rows, (model, recipe: "copies" for either recipe with copies), and
+#: the :func:`label` of their runs
 README_ROWS = {
     ("`EdgeFieldNet(log_features=True)`", "copies"): "edgefieldnet",
     ("DiffusionNet (written from the paper)", "copies"): "diffusionnet",
@@ -369,10 +377,9 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
     for model, recipe, fixed_cell, cross_cell, _, parameters in rows:
-        copies = recipe == "stretched copies, averaged weights"
-        assert copies or recipe == "DiffusionNet's", recipe
-        name = README_ROWS[(model, "copies" if copies else recipe)]
-        name += ", 4 stretched copies, averaged last 10" if copies else ""
+        assert recipe in README_RECIPES, recipe
+        name = README_ROWS[(model, "DiffusionNet's" if recipe == "DiffusionNet's" else "copies")]
+        name += README_RECIPES[recipe]
         mine = [r for r in runs if bench.label(r) == name]
         fixed = [r["test_accuracy"] for r in mine if r["split"] == "fixed"]
         if fixed_cell == "not run":
