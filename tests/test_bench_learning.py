@@ -371,7 +371,9 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         for line in section.splitlines()
         if line.startswith("| ") and not line.startswith("| model")
     ]
-    assert len(rows) == len(README_ROWS)
+    kinds = [(m, "DiffusionNet's" if r == "DiffusionNet's" else "copies") for m, r, *_ in rows]
+    assert set(kinds) == set(README_ROWS)
+    assert len({(m, r) for m, r, *_ in rows}) == len(rows)  # no row twice
 
     def mean_std(xs: list[float]) -> str:
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
