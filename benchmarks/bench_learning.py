@@ -692,10 +692,9 @@ def main(argv=None) -> list[dict]:
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
+    tested = np.any([m for _, _, m in evaluations], axis=0)
     copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian, a.stretch)
-    if a.tta:
-        tested = np.any([m for _, _, m in evaluations], axis=0)
-        tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch)
+    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]

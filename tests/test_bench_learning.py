@@ -328,7 +328,6 @@ def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
 #: the README's recipes, and what they add to the :func:`label` of a run
 README_RECIPES = {
     "DiffusionNet's": "",
-    "stretched copies, averaged weights": ", 4 stretched copies, averaged last 10",
     "stretched copies up to 1.25, averaged weights": ", 4 stretched copies, averaged last 10",
     "stretched copies up to 1.5, averaged weights": ", 4 stretched copies (up to 1.5), averaged last 10",
 }
@@ -371,8 +370,11 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         for line in section.splitlines()
         if line.startswith("| ") and not line.startswith("| model")
     ]
-    kinds = [(m, "DiffusionNet's" if r == "DiffusionNet's" else "copies") for m, r, *_ in rows]
-    assert set(kinds) == set(README_ROWS)
+
+    def key(model: str, recipe: str) -> tuple[str, str]:  # the README_ROWS entry of a row
+        return model, recipe if recipe == "DiffusionNet's" else "copies"
+
+    assert {key(m, r) for m, r, *_ in rows} == set(README_ROWS)
     assert len({(m, r) for m, r, *_ in rows}) == len(rows)  # no row twice
 
     def mean_std(xs: list[float]) -> str:
@@ -380,8 +382,7 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
 
     for model, recipe, fixed_cell, cross_cell, _, parameters in rows:
         assert recipe in README_RECIPES, recipe
-        name = README_ROWS[(model, "DiffusionNet's" if recipe == "DiffusionNet's" else "copies")]
-        name += README_RECIPES[recipe]
+        name = README_ROWS[key(model, recipe)] + README_RECIPES[recipe]
         mine = [r for r in runs if bench.label(r) == name]
         fixed = [r["test_accuracy"] for r in mine if r["split"] == "fixed"]
         if fixed_cell == "not run":
