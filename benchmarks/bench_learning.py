@@ -24,6 +24,10 @@ each step takes the mesh or one of its copies, so a run takes as many steps as w
 them. ``--tta K`` also reports the accuracy of the class probabilities averaged over each
 test mesh and K stretched copies of it.
 
+``--weight-decay W`` trains every model with AdamW (decoupled weight decay ``W``) in place
+of Adam; ``--schedule cosine`` decays the learning rate along a half cosine to 0 over the
+run in place of halving it every 50 epochs.
+
 ``--data`` (or ``$TORCH_EDGEVF_PSB``) is the ``psb_watertight_2k.npz`` file (see the
 README for how to build it); operators are cached on disk in ``--cache`` (default
 ``$TORCH_EDGEVF_CACHE`` or ``~/.cache/torch_edgevf/operators``). ``--split FILE`` takes a
@@ -105,6 +109,8 @@ VERTEX_LAPLACIANS = ("cotan", "robust")
 STRETCH = 1.25
 #: epochs whose final weights are averaged (those after the learning rate is halved at 50)
 AVERAGE_EPOCHS = 10
+#: learning-rate schedules: halved every 50 epochs (DiffusionNet's), or a cosine decay to 0
+SCHEDULES = ("step", "cosine")
 
 
 def operator_options(vertex_laplacian: str = "cotan") -> dict:
@@ -272,11 +278,24 @@ def label_smoothing_loss(logits: torch.Tensor, label: int, smoothing: float = 0.
     return -(target * logp).sum(-1).mean()
 
 
-def new_model(name: str, batch, num_classes: int, seed: int):
-    """Model ``name`` initialised from ``seed``, and its Adam optimiser at the recipe's rate."""
+def new_model(name: str, batch, num_classes: int, seed: int, weight_decay: float = 0.0):
+    """Model ``name`` initialised from ``seed``, and its optimiser at the recipe's rate: Adam,
+    or AdamW (decoupled weight decay) with ``weight_decay > 0``."""
     torch.manual_seed(seed)
     model = MODELS[name](batch.features.shape[1], num_classes)
+    if weight_decay > 0:
+        return model, torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=weight_decay)
     return model, torch.optim.Adam(model.parameters(), lr=1e-3)
+
+
+def new_schedule(opt, schedule: str, epochs: int):
+    """The learning-rate schedule, stepped once per epoch: ``"step"`` halves the rate every
+    50 epochs; ``"cosine"`` decays it along a half cosine to 0 after the last epoch."""
+    if schedule == "step":
+        return torch.optim.lr_scheduler.StepLR(opt, step_size=50, gamma=0.5)
+    if schedule == "cosine":
+        return torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=epochs)
+    raise ValueError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
 
 
 def train_step(model, opt, batch) -> None:
@@ -315,6 +334,8 @@ def fit(
     num_classes: int,
     average: int = AVERAGE_EPOCHS,
     copies: list | None = None,
+    weight_decay: float = 0.0,
+    schedule: str = "step",
 ):
     """Train model ``name``: ``(model, averaged model or None, seconds)``.
 
@@ -323,9 +344,10 @@ def fit(
     Averaging draws no random numbers: the final weights are those of a run without it.
     ``copies[i]``: augmented copies of ``train_set[i]``; each step then takes the mesh or
     one of its copies, drawn uniformly (the same number of steps as without them).
+    ``weight_decay`` and ``schedule``: see :func:`new_model` and :func:`new_schedule`.
     """
-    model, opt = new_model(name, train_set[0], num_classes, seed)
-    sched = torch.optim.lr_scheduler.StepLR(opt, step_size=50, gamma=0.5)
+    model, opt = new_model(name, train_set[0], num_classes, seed, weight_decay)
+    sched = new_schedule(opt, schedule, epochs)
     averaged = torch.optim.swa_utils.AveragedModel(model) if average > 0 else None
     order = torch.Generator().manual_seed(seed)
     pick = torch.Generator().manual_seed(seed)  # apart from the order: that stays as without copies
@@ -353,13 +375,17 @@ def train(
     average: int = AVERAGE_EPOCHS,
     copies: list | None = None,
     test_copies: list | None = None,
+    weight_decay: float = 0.0,
+    schedule: str = "step",
 ) -> dict:
     """The record of one run: accuracies after the final epoch and, with ``average``, those
     of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`).
     Training accuracy is that on ``train_set`` (without the copies). With ``test_copies``
     (per test mesh, its stretched copies), also the accuracies of the probabilities
     averaged over each test mesh and its copies (:func:`tta_accuracy`)."""
-    model, averaged, seconds = fit(name, train_set, seed, epochs, num_classes, average, copies)
+    model, averaged, seconds = fit(
+        name, train_set, seed, epochs, num_classes, average, copies, weight_decay, schedule
+    )
     out = {
         "model": name,
         "seed": seed,
@@ -461,6 +487,10 @@ def label(r: dict) -> str:
         name += f", {r['augment']} stretched copies"
         if r.get("stretch", STRETCH) != STRETCH:
             name += f" (up to {r['stretch']:g})"
+    if r.get("weight_decay"):
+        name += f", weight decay {r['weight_decay']:g}"
+    if r.get("schedule", "step") != "step":
+        name += f", {r['schedule']} schedule"
     return f"{name}, averaged last {r['average_epochs']}" if r.get("averaged") else name
 
 
@@ -577,6 +607,19 @@ def main(argv=None) -> list[dict]:
         help="also report the accuracy of the class probabilities averaged over each test mesh and "
         "K stretched copies of it (test-time augmentation)",
     )
+    p.add_argument(
+        "--weight-decay",
+        type=float,
+        default=0.0,
+        metavar="W",
+        help="decoupled weight decay (AdamW) for every model (default 0: Adam)",
+    )
+    p.add_argument(
+        "--schedule",
+        default="step",
+        choices=SCHEDULES,
+        help="learning rate halved every 50 epochs (step, default) or a cosine decay to 0",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--vertex-laplacian",
@@ -637,6 +680,8 @@ def main(argv=None) -> list[dict]:
         p.error("--tta must be 0 (off) or a number of copies")
     if a.average < 0:
         p.error("--average must be 0 (off) or a number of epochs")
+    if not a.weight_decay >= 0:
+        p.error("--weight-decay must be 0 (off) or positive")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
     if sum(map(bool, (a.folds, a.split, a.validation))) > 1:
@@ -712,6 +757,8 @@ def main(argv=None) -> list[dict]:
                     a.average,
                     train_copies,
                     test_copies,
+                    a.weight_decay,
+                    a.schedule,
                 )
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
                 if a.augment:
@@ -722,6 +769,10 @@ def main(argv=None) -> list[dict]:
                     r["stretch"] = a.stretch
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
+                if a.weight_decay:
+                    r["weight_decay"] = a.weight_decay
+                if a.schedule != "step":
+                    r["schedule"] = a.schedule
                 print(json.dumps(r), flush=True)
                 results.append(r)
                 if a.json:

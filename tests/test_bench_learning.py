@@ -91,6 +91,8 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--augment", "-1"], "--augment must be 0"),
         (["--tta", "-1"], "--tta must be 0"),
         (["--stretch", "0.8"], "--stretch must be at least 1"),
+        (["--weight-decay", "-0.1"], "--weight-decay must be 0"),
+        (["--weight-decay", "nan"], "--weight-decay must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -323,6 +325,70 @@ def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
     assert bench.label(run) == "edgefieldnet, 4 stretched copies"
     assert bench.label(dict(run, stretch=bench.STRETCH)) == "edgefieldnet, 4 stretched copies"
     assert bench.label(dict(run, stretch=1.5)) == "edgefieldnet, 4 stretched copies (up to 1.5)"
+
+
+def test_schedules_halve_or_decay_the_rate_along_a_cosine(bench):
+    def rates(schedule, epochs):
+        opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1e-3)
+        sched, out = bench.new_schedule(opt, schedule, epochs), []
+        for _ in range(epochs):
+            out.append(opt.param_groups[0]["lr"])
+            opt.step()
+            sched.step()
+        return np.array(out + [opt.param_groups[0]["lr"]])
+
+    step = rates("step", 120)
+    assert (step[:50] == 1e-3).all() and (step[50:100] == 5e-4).all() and (step[100:] == 2.5e-4).all()
+    cosine = rates("cosine", 60)
+    expected = 1e-3 * (1 + np.cos(np.pi * np.arange(61) / 60)) / 2
+    np.testing.assert_allclose(cosine, expected, rtol=1e-9, atol=1e-15)
+    assert cosine[-1] < 1e-12 and (np.diff(cosine) < 0).all()
+    with pytest.raises(ValueError, match="schedule must be one of"):
+        bench.new_schedule(torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1), "linear", 3)
+
+
+def test_weight_decay_takes_adamw_and_shrinks_weights_without_gradients(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batch = _toy_batches()[0]
+    model, opt = bench.new_model("toy", batch, 3, seed=0)
+    assert type(opt) is torch.optim.Adam and opt.param_groups[0]["weight_decay"] == 0
+    model, opt = bench.new_model("toy", batch, 3, seed=0, weight_decay=0.5)
+    assert type(opt) is torch.optim.AdamW and opt.param_groups[0]["weight_decay"] == 0.5
+    before = model.linear.weight.detach().clone()
+    for p in model.parameters():
+        p.grad = torch.zeros_like(p)
+    opt.step()  # a zero gradient moves nothing but the decay: w (1 - lr wd)
+    torch.testing.assert_close(model.linear.weight, before * (1 - 1e-3 * 0.5))
+
+
+def test_runs_record_and_name_their_optimiser_options(bench, monkeypatch):
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches()
+    plain = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0)
+    decayed = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, weight_decay=0.5)
+    cosine = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, schedule="cosine")
+    assert plain["parameters"] == decayed["parameters"] == cosine["parameters"]
+    run = {"model": "edgefieldnet", "augment": 4}
+    assert bench.label(dict(run, weight_decay=0.05)) == "edgefieldnet, 4 stretched copies, weight decay 0.05"
+    assert bench.label(dict(run, schedule="cosine")) == "edgefieldnet, 4 stretched copies, cosine schedule"
+    assert bench.label(dict(run, schedule="step", weight_decay=0)) == "edgefieldnet, 4 stretched copies"
+    fake = {
+        "meshes": [None] * 12,
+        "labels": np.repeat(np.arange(3), 4),
+        "split": np.tile([0, 0, 0, 1], 3),
+        "classes": ["a", "b", "c"],
+    }
+    record = dict(plain, test_accuracy=0.5, train_seconds=1.0, seconds_per_step=0.1)
+    saved = []
+    monkeypatch.setattr(bench, "load_psb", lambda path: fake)
+    monkeypatch.setattr(bench, "precompute", lambda d, *a: ([batches[i] for i in range(12)], []))
+    monkeypatch.setattr(bench, "train", lambda *a: saved.append(a) or dict(record))
+    argv = ["--data", __file__, "--models", "edgefieldnet", "--seeds", "0", "--threads", "1"]
+    out = bench.main(argv + ["--weight-decay", "0.05", "--schedule", "cosine"])
+    assert saved[0][-2:] == (0.05, "cosine")
+    assert out[0]["weight_decay"] == 0.05 and out[0]["schedule"] == "cosine"
+    assert {"weight_decay", "schedule"}.isdisjoint(bench.main(argv)[0])  # the defaults: not recorded
+    assert saved[1][-2:] == (0.0, "step")
 
 
 #: the README's recipes, and what they add to the :func:`label` of a run
