@@ -299,7 +299,7 @@ def new_schedule(opt, schedule: str, epochs: int):
 
 
 def train_step(model, opt, batch) -> None:
-    """One optimiser step on one mesh: label-smoothed cross-entropy, backward, Adam."""
+    """One optimiser step on one mesh: label-smoothed cross-entropy, backward, step."""
     opt.zero_grad()
     label_smoothing_loss(model(batch)[0], int(batch.labels)).backward()
     opt.step()
@@ -680,8 +680,8 @@ def main(argv=None) -> list[dict]:
         p.error("--tta must be 0 (off) or a number of copies")
     if a.average < 0:
         p.error("--average must be 0 (off) or a number of epochs")
-    if not a.weight_decay >= 0:
-        p.error("--weight-decay must be 0 (off) or positive")
+    if not 0 <= a.weight_decay < float("inf"):
+        p.error("--weight-decay must be 0 (off) or a finite positive number")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
     if sum(map(bool, (a.folds, a.split, a.validation))) > 1:

@@ -93,6 +93,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--stretch", "0.8"], "--stretch must be at least 1"),
         (["--weight-decay", "-0.1"], "--weight-decay must be 0"),
         (["--weight-decay", "nan"], "--weight-decay must be 0"),
+        (["--weight-decay", "inf"], "--weight-decay must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
