@@ -34,7 +34,9 @@ import torch_edgevf as ev
 if os.environ.get("PYTEST_XDIST_WORKER"):
     torch.set_num_threads(1)
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+#: the real meshes and the PSB file of the data tests (skipped where absent): the folder
+#: ``$TORCH_EDGEVF_TEST_DATA``, else ``shared/`` beside the repository
+SHARED = Path(os.environ.get("TORCH_EDGEVF_TEST_DATA") or Path(__file__).resolve().parents[2] / "shared")
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
@@ -63,19 +65,20 @@ def record_instances(monkeypatch, module, name: str) -> list:
 
 
 def shared_path(*parts: str) -> Path:
-    """``shared/<parts>`` next to the repository's folder, or skip the test saying why.
+    """``<parts>`` inside :data:`SHARED`, or skip the test saying why.
 
-    The real meshes and the PSB file live outside the repository (``../shared``); the
-    tests that need them are skipped, with the path, where that folder is absent.
+    The real meshes and the PSB file live outside the repository (``$TORCH_EDGEVF_TEST_DATA``
+    or ``../shared``); the tests that need them are skipped, with the path, where that
+    folder is absent.
     """
     path = SHARED.joinpath(*parts)
     if not path.exists():
-        pytest.skip(f"{path} is not available (the shared data next to the repository)")
+        pytest.skip(f"{path} is not available (set $TORCH_EDGEVF_TEST_DATA to the shared data)")
     return path
 
 
 def psb_file() -> Path:
-    """``psb_watertight_2k.npz``: ``$TORCH_EDGEVF_PSB``, else ``../shared/datasets``; or skip."""
+    """``psb_watertight_2k.npz``: ``$TORCH_EDGEVF_PSB``, else ``datasets/`` in :data:`SHARED`; or skip."""
     env = os.environ.get("TORCH_EDGEVF_PSB")
     if env:
         if not Path(env).is_file():
