@@ -19,7 +19,9 @@ from torch_edgevf.io import (
     save_mesh,
 )
 
-MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+from conftest import SHARED
+
+MESH_DIR = SHARED / "meshes"
 
 # shared/meshes/README.md (next to the repository): V, F, Euler characteristic, boundary edges
 MESH_TABLE = {

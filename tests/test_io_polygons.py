@@ -15,6 +15,8 @@ import trimesh
 
 from torch_edgevf.io import load_mesh, read_triangles
 
+from conftest import SHARED
+
 # the L (area 3) in its own coordinates, counter-clockwise, from a tip next to the reflex corner (1, 1)
 L_2D = np.array([(2, 1), (1, 1), (1, 2), (0, 2), (0, 0), (2, 0)], dtype=np.float64)
 U_AXIS = np.array([2.0, -2.0, 1.0]) / 3
@@ -281,7 +283,7 @@ def test_triangle_ply_reads_as_trimesh_does(tmp_path, fmt_name):
 
 
 def test_shared_triangle_mesh_reads_as_trimesh_does():
-    path = Path(__file__).resolve().parents[1].parent / "shared" / "meshes" / "spot_low_resolution.obj"
+    path = SHARED / "meshes" / "spot_low_resolution.obj"
     if not path.is_file():
         pytest.skip(f"{path} is not available")
     v, f, _ = read_triangles(path)

@@ -19,7 +19,6 @@ import re
 import signal
 import threading
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +27,8 @@ import torch
 import torch_edgevf as ev
 from torch_edgevf.mesh.diagnose import diagnose
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+from conftest import SHARED
+
 MESHES = SHARED / "meshes"
 PSB = SHARED / "datasets" / "psb_watertight_2k.npz"
 

@@ -1,7 +1,5 @@
 """Singularity detection, location and splitting (thesis 4.1, B.2)."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -19,7 +17,9 @@ from torch_edgevf.fields.singularities import (
 )
 from torch_edgevf.mesh.topology import Topology
 
-SHARED_MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
+from conftest import SHARED
+
+SHARED_MESHES = SHARED / "meshes"
 
 
 # --------------------------------------------------------------------------- helpers
