@@ -95,6 +95,10 @@ MODELS = {
     "edgefieldnet-vecdrop": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, log_features=True, vector_dropout=0.5
     ),
+    # the vector stream dropped as a whole for half of the training steps (modality dropout)
+    "edgefieldnet-streamdrop": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, stream_dropout=0.5
+    ),
     # 8 complex channels in the vector stream in place of 16
     "edgefieldnet-vec8": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, log_features=True, vector_width=8

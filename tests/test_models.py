@@ -155,6 +155,68 @@ def test_dropout_options_act_in_training_only(mesh, cls, pool):
         assert (first - plain(batch)).abs().max() > 1e-6
 
 
+def _sample(v, f, label=0):
+    ops = precompute.compute_operators(v, f, **OPTIONS)
+    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8)
+    return batching.MeshSample(ops, x, label)
+
+
+@pytest.mark.parametrize("vector", ["edge", "vertex"])
+def test_a_mesh_without_its_vector_stream_is_alone_in_a_batch(mesh, vector):
+    """keep=[True, False] on a batch of two: each mesh's output is its own, the first with
+    its fields, the second as the block's path that skips the fields entirely."""
+    v, f = mesh
+    first, second = _sample(v, f), _sample(*perturbed_icosphere(1, 0.05, seed=7))
+    pair = batching.collate_meshes([first, second])
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, vector=vector).double()
+    with torch.no_grad():
+        block.diffusion.raw_times.fill_(0.01)
+        x = torch.randn(pair.features.shape[0], 8, dtype=torch.float64)
+        z0 = torch.randn(pair.edges.shape[0] if vector == "edge" else x.shape[0], 4, dtype=torch.complex128)
+        keep = torch.tensor([True, False])
+        xb, zb = block(x, z0 * keep[pair.edge_batch if vector == "edge" else pair.vertex_batch, None], pair, keep)
+        n0 = first.operators.num_vertices
+        e0 = first.operators.num_edges if vector == "edge" else n0
+        alone = [batching.collate_meshes([s]) for s in (first, second)]
+        x0, z1 = block(x[:n0], z0[:e0], alone[0])
+        x1, z2 = block(x[n0:], None, alone[1], torch.tensor([False]))
+    torch.testing.assert_close(xb[:n0], x0)
+    torch.testing.assert_close(zb[:e0], z1)
+    torch.testing.assert_close(xb[n0:], x1)
+    assert z2 is None and zb[e0:].abs().max() == 0  # no fields where the stream is dropped
+    assert (x1 - x[n0:]).abs().max() > 1e-6  # the scalar stream still acts
+
+
+def test_stream_dropout_trains_on_both_networks_and_evaluates_the_full_one(mesh):
+    """Same seed, same weights and the same output in evaluation as without it; in training
+    each forward is either the full network or the one without its vector stream."""
+    batch = _batch(*mesh)
+    small = dict(width=8, vector_width=4, num_blocks=2, mlp=(8,), dropout=0.0)
+    torch.manual_seed(0)
+    plain = models.EdgeFieldNet(8, 5, **small).double()
+    torch.manual_seed(0)
+    dropped = models.EdgeFieldNet(8, 5, **small, stream_dropout=0.5).double()
+    assert all(torch.equal(p, q) for p, q in zip(plain.state_dict().values(), dropped.state_dict().values()))
+    with torch.no_grad():
+        full = plain.eval()(batch)
+        torch.testing.assert_close(dropped.eval()(batch), full, rtol=0, atol=0)
+        dropped.train()
+        outs = [dropped(batch) for _ in range(24)]
+        scalar = [o for o in outs if (o - full).abs().max() > 1e-9]
+        assert 0 < len(scalar) < len(outs)  # both networks are drawn
+        for o in scalar[1:]:
+            torch.testing.assert_close(o, scalar[0], rtol=0, atol=0)
+        assert (scalar[0] - full).abs().max() > 1e-6
+
+
+def test_stream_dropout_needs_a_vector_stream():
+    with pytest.raises(ValueError, match="stream_dropout needs a vector stream"):
+        models.EdgeFieldNet(8, 5, vector="none", stream_dropout=0.5)
+    with pytest.raises(ValueError, match="stream_dropout must be a probability"):
+        models.EdgeFieldNet(8, 5, stream_dropout=1.0)
+
+
 @pytest.mark.parametrize(
     "kwargs", [dict(head_dropout=1.0), dict(vector_dropout=-0.1), dict(head_dropout="a")]
 )

@@ -247,6 +247,13 @@ class EdgeFieldBlock(nn.Module):
     vector_dropout : float
         Dropout on the vector stream's features where they enter the per-vertex MLP
         (pooled invariants, divergence and curl); ``0`` (default) draws no random numbers.
+
+    Forward
+    -------
+    ``forward(x, z, batch, keep=None) -> (x, z)``: ``keep``, a ``(B,)`` bool tensor or
+    None (all), says which meshes of the batch use the vector stream: the fields of the
+    others are zero, so their scalars pass through the block as in ``vector="none"``
+    (see ``stream_dropout`` of :class:`EdgeFieldNet`).
     """
 
     def __init__(
@@ -289,10 +296,13 @@ class EdgeFieldBlock(nn.Module):
         # created only when used, so that a seed draws the same numbers as without it
         self.vector_dropout = nn.Dropout(vector_dropout) if vector_dropout > 0 and vector != "none" else None
 
-    def forward(self, x, z, batch):
+    def forward(self, x, z, batch, keep=None):
         xd = _diffuse_vertices(self.diffusion, x, batch)
         feats = [x, xd]
-        if self.vector != "none":
+        if self.vector != "none" and keep is not None and not bool(keep.any()):
+            # no mesh uses the fields: they are zero, and so are their features
+            feats.append(x.new_zeros(x.shape[0], self.mlp[0].in_features - 2 * x.shape[1]))
+        elif self.vector != "none":
             a = torch.view_as_complex(self.lift(xd).unflatten(1, (self.vector_width, 2)).contiguous())
             if self.vector == "edge":
                 u = gradient_features(a, batch.gradient, batch.edge_mass)
@@ -300,6 +310,9 @@ class EdgeFieldBlock(nn.Module):
                 u = gradient_features(a, batch.vertex_gradient)
             if z is not None and self.mix is not None:
                 u = u + self.mix(z)
+            if keep is not None and not bool(keep.all()):
+                index = batch.edge_batch if self.vector == "edge" else batch.vertex_batch
+                u = u * keep[index].to(u.real.dtype).unsqueeze(1)
             if self.vector == "edge":
                 ud = self.field_diffusion(
                     u,
@@ -352,6 +365,15 @@ class EdgeFieldNet(nn.Module):
     head_dropout : float
         Dropout on what the output layer takes (the pooled mean and deviation with
         ``pool="mean_std"``, else the last scalars per vertex).
+    stream_dropout : float
+        In training, the probability that a mesh goes through the network without its
+        vector stream (its fields zero in every block, the vector stream's features
+        entering the MLPs zero; not rescaled), drawn per mesh and step, as modality
+        dropout drops one input stream of a multi-stream network: the scalar stream
+        learns to classify on its own and the vector stream to add to it. In
+        evaluation every mesh uses both streams. A batch in which every mesh drew the
+        scalar stream alone skips the vector stream's computation. ``0`` (default) draws
+        no random numbers.
     pool : {"mean_std", "mean"}
         Readout of ``head="global"``: the mass-weighted mean and standard deviation of
         the last block's scalars, then a linear layer (default); or a linear layer per
@@ -383,10 +405,16 @@ class EdgeFieldNet(nn.Module):
         high_pass: bool = False,
         vector_dropout: float = 0.0,
         head_dropout: float = 0.0,
+        stream_dropout: float = 0.0,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
-        _check_dropout(dropout=dropout, vector_dropout=vector_dropout, head_dropout=head_dropout)
+        _check_dropout(
+            dropout=dropout, vector_dropout=vector_dropout, head_dropout=head_dropout, stream_dropout=stream_dropout
+        )
+        if stream_dropout > 0 and vector == "none":
+            raise ValueError("stream_dropout needs a vector stream; vector='none' has none")
+        self.stream_dropout = stream_dropout
         self.in_channels, self.head, self.vector = in_channels, head, vector
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
@@ -412,8 +440,11 @@ class EdgeFieldNet(nn.Module):
         _check_batch(batch, self.in_channels, needs)
         _check_dtype(self, batch)
         x, z = self.first(_inputs(self, batch)), None
+        keep = None
+        if self.training and self.stream_dropout > 0:
+            keep = torch.rand(batch.num_meshes, device=x.device) >= self.stream_dropout
         for block in self.blocks:
-            x, z = block(x, z, batch)
+            x, z = block(x, z, batch, keep)
         return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
 
 
