@@ -103,6 +103,14 @@ MODELS = {
     "edgefieldnet-vec8": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, log_features=True, vector_width=8
     ),
+    # 8 complex channels and 4 blocks: DiffusionNet's depth at the cost of 3 full blocks
+    "edgefieldnet-vec8-4blocks": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, vector_width=8, num_blocks=4
+    ),
+    # the accumulated fields' invariants pooled beside the last scalars in the readout
+    "edgefieldnet-fieldread": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, readout_fields=True
+    ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
     "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }

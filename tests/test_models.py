@@ -47,6 +47,12 @@ NETWORKS = {
     "edge-dropout": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector_dropout=0.5, head_dropout=0.5
     ),
+    "edge-fieldread": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, readout_fields=True
+    ),
+    "edge-vertex-fieldread": lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex", readout_fields=True
+    ),
     "edge-vertex": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex"
     ),
@@ -208,6 +214,31 @@ def test_stream_dropout_trains_on_both_networks_and_evaluates_the_full_one(mesh)
         for o in scalar[1:]:
             torch.testing.assert_close(o, scalar[0], rtol=0, atol=0)
         assert (scalar[0] - full).abs().max() > 1e-6
+
+
+def test_the_field_readout_reads_the_fields(mesh):
+    """With readout_fields the rest is initialised as without it, and the output moves with
+    the fields' readout weights (and, with the whole vector stream dropped, does not)."""
+    batch = _batch(*mesh)
+    small = dict(width=8, vector_width=4, num_blocks=2, mlp=(8,), dropout=0.0)
+    torch.manual_seed(0)
+    plain = models.EdgeFieldNet(8, 5, **small).double().eval()
+    torch.manual_seed(0)
+    read = models.EdgeFieldNet(8, 5, **small, readout_fields=True).double().eval()
+    shared = {k: v for k, v in read.state_dict().items() if k != "field_products" and not k.startswith("last.")}
+    assert all(torch.equal(v, plain.state_dict()[k]) for k, v in shared.items())
+    assert read.last.in_features == 2 * (8 + 4)
+    with torch.no_grad():
+        a = read(batch)
+        read.field_products.mul_(-2.0)
+        assert (read(batch) - a).abs().max() > 1e-6
+
+
+def test_field_readout_options_are_checked():
+    with pytest.raises(ValueError, match="readout_fields needs a vector stream"):
+        models.EdgeFieldNet(8, 5, vector="none", readout_fields=True)
+    with pytest.raises(ValueError, match="readout_fields must be True or False"):
+        models.EdgeFieldNet(8, 5, readout_fields=1)
 
 
 def test_stream_dropout_needs_a_vector_stream():

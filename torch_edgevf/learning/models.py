@@ -382,6 +382,12 @@ class EdgeFieldNet(nn.Module):
         Take the logarithm of the input features first (for positive features whose
         scales span orders of magnitude, such as heat kernel signatures; others raise
         ``ValueError``).
+    readout_fields : bool
+        The readout also takes the fields of the vector stream (the sum of every block's
+        fields): their invariant products ``tanh Re(z conj(z A))`` with a learned complex
+        ``A`` (``C_v`` channels), pooled from the edges to the vertices, beside the last
+        scalars. The output layer then takes ``C + C_v`` channels per vertex (twice that
+        with ``pool="mean_std"``).
 
     Forward
     -------
@@ -406,6 +412,7 @@ class EdgeFieldNet(nn.Module):
         vector_dropout: float = 0.0,
         head_dropout: float = 0.0,
         stream_dropout: float = 0.0,
+        readout_fields: bool = False,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
@@ -432,8 +439,28 @@ class EdgeFieldNet(nn.Module):
             )
             for i in range(num_blocks)
         )
-        self.last = _last_layer(width, out_channels, head, pool)
+        if not isinstance(readout_fields, bool):
+            raise ValueError(f"readout_fields must be True or False, got {readout_fields!r}")
+        if readout_fields and vector == "none":
+            raise ValueError("readout_fields needs a vector stream; vector='none' has none")
+        self.last = _last_layer(width + (vector_width if readout_fields else 0), out_channels, head, pool)
         self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
+        # created last, so that a seed initialises the rest as without it
+        self.field_products = (
+            nn.Parameter(torch.randn(vector_width, vector_width, 2) / (2 * vector_width) ** 0.5)
+            if readout_fields
+            else None
+        )
+
+    def _field_readout(self, z, batch) -> torch.Tensor:
+        """The invariant products of the fields ``z`` at the vertices (zero where there are none)."""
+        n = batch.features.shape[0]
+        if z is None:  # every mesh went without its vector stream (stream_dropout)
+            return batch.features.new_zeros(n, self.field_products.shape[0])
+        inv = torch.tanh(invariant_features(z, self.field_products, modulus=False))
+        if self.vector == "edge":
+            inv = pool_edges_to_vertices(inv, batch.edges, n, batch.edge_mass)
+        return inv
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
@@ -445,6 +472,8 @@ class EdgeFieldNet(nn.Module):
             keep = torch.rand(batch.num_meshes, device=x.device) >= self.stream_dropout
         for block in self.blocks:
             x, z = block(x, z, batch, keep)
+        if self.field_products is not None:
+            x = torch.cat([x, self._field_readout(z, batch)], dim=1)
         return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
 
 
