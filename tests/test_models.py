@@ -48,7 +48,15 @@ NETWORKS = {
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector_dropout=0.5, head_dropout=0.5
     ),
     "edge-fieldread": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, readout_fields=True
+        8,
+        5,
+        width=8,
+        vector_width=4,
+        num_blocks=2,
+        mlp=(8,),
+        head=head,
+        log_features=True,
+        readout_fields=True,
     ),
     "edge-vertex-fieldread": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex", readout_fields=True
@@ -181,7 +189,9 @@ def test_a_mesh_without_its_vector_stream_is_alone_in_a_batch(mesh, vector):
         x = torch.randn(pair.features.shape[0], 8, dtype=torch.float64)
         z0 = torch.randn(pair.edges.shape[0] if vector == "edge" else x.shape[0], 4, dtype=torch.complex128)
         keep = torch.tensor([True, False])
-        xb, zb = block(x, z0 * keep[pair.edge_batch if vector == "edge" else pair.vertex_batch, None], pair, keep)
+        xb, zb = block(
+            x, z0 * keep[pair.edge_batch if vector == "edge" else pair.vertex_batch, None], pair, keep
+        )
         n0 = first.operators.num_vertices
         e0 = first.operators.num_edges if vector == "edge" else n0
         alone = [batching.collate_meshes([s]) for s in (first, second)]
@@ -225,7 +235,9 @@ def test_the_field_readout_reads_the_fields(mesh):
     plain = models.EdgeFieldNet(8, 5, **small).double().eval()
     torch.manual_seed(0)
     read = models.EdgeFieldNet(8, 5, **small, readout_fields=True).double().eval()
-    shared = {k: v for k, v in read.state_dict().items() if k != "field_products" and not k.startswith("last.")}
+    shared = {
+        k: v for k, v in read.state_dict().items() if k != "field_products" and not k.startswith("last.")
+    }
     assert all(torch.equal(v, plain.state_dict()[k]) for k, v in shared.items())
     assert read.last.in_features == 2 * (8 + 4)
     with torch.no_grad():

@@ -417,7 +417,10 @@ class EdgeFieldNet(nn.Module):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
         _check_dropout(
-            dropout=dropout, vector_dropout=vector_dropout, head_dropout=head_dropout, stream_dropout=stream_dropout
+            dropout=dropout,
+            vector_dropout=vector_dropout,
+            head_dropout=head_dropout,
+            stream_dropout=stream_dropout,
         )
         if stream_dropout > 0 and vector == "none":
             raise ValueError("stream_dropout needs a vector stream; vector='none' has none")
@@ -452,12 +455,12 @@ class EdgeFieldNet(nn.Module):
             else None
         )
 
-    def _field_readout(self, z, batch) -> torch.Tensor:
+    def _field_readout(self, z, batch, products: torch.Tensor) -> torch.Tensor:
         """The invariant products of the fields ``z`` at the vertices (zero where there are none)."""
         n = batch.features.shape[0]
         if z is None:  # every mesh went without its vector stream (stream_dropout)
-            return batch.features.new_zeros(n, self.field_products.shape[0])
-        inv = torch.tanh(invariant_features(z, self.field_products, modulus=False))
+            return batch.features.new_zeros(n, products.shape[0])
+        inv = torch.tanh(invariant_features(z, products, modulus=False))
         if self.vector == "edge":
             inv = pool_edges_to_vertices(inv, batch.edges, n, batch.edge_mass)
         return inv
@@ -473,7 +476,7 @@ class EdgeFieldNet(nn.Module):
         for block in self.blocks:
             x, z = block(x, z, batch, keep)
         if self.field_products is not None:
-            x = torch.cat([x, self._field_readout(z, batch)], dim=1)
+            x = torch.cat([x, self._field_readout(z, batch, self.field_products)], dim=1)
         return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
 
 
