@@ -17,10 +17,14 @@ from conftest import perturbed_icosphere, psb_file
 OPTIONS = dict(k_edge=16, k_vertex=16, vertex_gradient=True)
 
 
-def _batch(v, f, label=0, dtype=torch.float64):
+def _sample(v, f, label=0, dtype=torch.float64):
     ops = precompute.compute_operators(v, f, **OPTIONS)
     x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8)
-    return batching.MeshBatch.from_operators(ops.to(dtype), x.to(dtype), label)
+    return batching.MeshSample(ops.to(dtype), x.to(dtype), label)
+
+
+def _batch(v, f, label=0, dtype=torch.float64):
+    return batching.collate_meshes([_sample(v, f, label, dtype)])
 
 
 def _rotation(seed=0):
@@ -169,12 +173,6 @@ def test_dropout_options_act_in_training_only(mesh, cls, pool):
         assert (first - plain(batch)).abs().max() > 1e-6
 
 
-def _sample(v, f, label=0):
-    ops = precompute.compute_operators(v, f, **OPTIONS)
-    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8)
-    return batching.MeshSample(ops, x, label)
-
-
 @pytest.mark.parametrize("vector", ["edge", "vertex"])
 def test_a_mesh_without_its_vector_stream_is_alone_in_a_batch(mesh, vector):
     """keep=[True, False] on a batch of two: each mesh's output is its own, the first with
@@ -228,7 +226,7 @@ def test_stream_dropout_trains_on_both_networks_and_evaluates_the_full_one(mesh)
 
 def test_the_field_readout_reads_the_fields(mesh):
     """With readout_fields the rest is initialised as without it, and the output moves with
-    the fields' readout weights (and, with the whole vector stream dropped, does not)."""
+    the fields' readout weights."""
     batch = _batch(*mesh)
     small = dict(width=8, vector_width=4, num_blocks=2, mlp=(8,), dropout=0.0)
     torch.manual_seed(0)

@@ -174,6 +174,15 @@ def _diffuse_vertices(diffusion: LearnedDiffusion, x, batch) -> torch.Tensor:
     )
 
 
+def _vertex_invariants(u, products, batch, vector: str) -> torch.Tensor:
+    """``tanh Re(u conj(u A))`` of fields ``u``, at the vertices (pooled from the edges for
+    ``vector="edge"``; vertex fields as they are)."""
+    inv = torch.tanh(invariant_features(u, products, modulus=False))
+    if vector == "edge":
+        inv = pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    return inv
+
+
 def _symlog(x: torch.Tensor) -> torch.Tensor:
     """``sign(x) log(1 + |x|)``: tames the heavy tails of invariant features (slivers)."""
     return torch.sign(x) * torch.log1p(x.abs())
@@ -286,6 +295,7 @@ class EdgeFieldBlock(nn.Module):
             self.field_diffusion = LearnedDiffusion(vector_width, positivity="clamp", init_times=0.0)
             self.field_diffusion.raw_times.requires_grad_(learn_times)
             extra += 2 * vector_width
+        self.vector_features = extra  # channels the vector stream gives the MLP
         self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
         # zeros: no random numbers drawn, so a seed initialises the rest as without it
         self.high_pass = (
@@ -301,7 +311,7 @@ class EdgeFieldBlock(nn.Module):
         feats = [x, xd]
         if self.vector != "none" and keep is not None and not bool(keep.any()):
             # no mesh uses the fields: they are zero, and so are their features
-            feats.append(x.new_zeros(x.shape[0], self.mlp[0].in_features - 2 * x.shape[1]))
+            feats.append(x.new_zeros(x.shape[0], self.vector_features))
         elif self.vector != "none":
             a = torch.view_as_complex(self.lift(xd).unflatten(1, (self.vector_width, 2)).contiguous())
             if self.vector == "edge":
@@ -324,16 +334,10 @@ class EdgeFieldBlock(nn.Module):
                 if self.high_pass is not None:
                     ud = ud + complex_linear(u - ud, self.high_pass)
                 u = ud
-            inv = torch.tanh(invariant_features(u, self.products, modulus=False))
+            vec = [_vertex_invariants(u, self.products, batch, self.vector)]
             if self.vector == "edge":
                 dc = divergence_features(u, batch.gradient, batch.vertex_mass)
-                vec = [
-                    pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass),
-                    torch.tanh(dc.real),
-                    torch.tanh(dc.imag),
-                ]
-            else:
-                vec = [inv]
+                vec += [torch.tanh(dc.real), torch.tanh(dc.imag)]
             if self.vector_dropout is not None:
                 vec = [self.vector_dropout(t) for t in vec]
             feats += vec
@@ -424,6 +428,10 @@ class EdgeFieldNet(nn.Module):
         )
         if stream_dropout > 0 and vector == "none":
             raise ValueError("stream_dropout needs a vector stream; vector='none' has none")
+        if not isinstance(readout_fields, bool):
+            raise ValueError(f"readout_fields must be True or False, got {readout_fields!r}")
+        if readout_fields and vector == "none":
+            raise ValueError("readout_fields needs a vector stream; vector='none' has none")
         self.stream_dropout = stream_dropout
         self.in_channels, self.head, self.vector = in_channels, head, vector
         self.pool, self.log_features = pool, log_features
@@ -442,10 +450,6 @@ class EdgeFieldNet(nn.Module):
             )
             for i in range(num_blocks)
         )
-        if not isinstance(readout_fields, bool):
-            raise ValueError(f"readout_fields must be True or False, got {readout_fields!r}")
-        if readout_fields and vector == "none":
-            raise ValueError("readout_fields needs a vector stream; vector='none' has none")
         self.last = _last_layer(width + (vector_width if readout_fields else 0), out_channels, head, pool)
         self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
         # created last, so that a seed initialises the rest as without it
@@ -457,13 +461,9 @@ class EdgeFieldNet(nn.Module):
 
     def _field_readout(self, z, batch, products: torch.Tensor) -> torch.Tensor:
         """The invariant products of the fields ``z`` at the vertices (zero where there are none)."""
-        n = batch.features.shape[0]
         if z is None:  # every mesh went without its vector stream (stream_dropout)
-            return batch.features.new_zeros(n, products.shape[0])
-        inv = torch.tanh(invariant_features(z, products, modulus=False))
-        if self.vector == "edge":
-            inv = pool_edges_to_vertices(inv, batch.edges, n, batch.edge_mass)
-        return inv
+            return batch.features.new_zeros(batch.features.shape[0], products.shape[0])
+        return _vertex_invariants(z, products, batch, self.vector)
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
