@@ -28,12 +28,12 @@ def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
         ["--quick", "--cache", str(tmp_path / "cache"), "--threads", "1", "--json", str(out)]
     )
     saved = json.loads(out.read_text())
-    assert [r["model"] for r in saved] == ["edgefieldnet", "diffusionnet"] == [r["model"] for r in results]
+    assert [r["model"] for r in saved] == list(bench.DEFAULT_MODELS) == [r["model"] for r in results]
     for r in saved:
         assert set(r) >= {"test_accuracy", "train_accuracy", "train_seconds", "parameters", "seed", "split"}
         assert 0 <= r["test_accuracy"] <= 1 and r["train_seconds"] > 0 and r["parameters"] > 10_000
     printed = capsys.readouterr().out
-    assert "| edgefieldnet |" in printed and "| diffusionnet |" in printed
+    assert "| edgefieldnet |" in printed and "| diffusionnet-nodropout |" in printed
     assert "operators: 32 meshes, 32 computed" in printed
     assert bench.main(["--table", str(out)]) == saved
 
@@ -109,11 +109,27 @@ def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
 @pytest.mark.slow
 def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, capsys):
     results = bench.main(["--step-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
-    assert [r["model"] for r in results] == ["edgefieldnet", "diffusionnet"]
+    assert [r["model"] for r in results] == ["edgefieldnet", "diffusionnet-nodropout"]
     for r in results:
         assert len(r["seconds_per_step"]) == 3 and all(0 < t < 60 for t in r["seconds_per_step"])
     printed = capsys.readouterr().out
-    assert "edgefieldnet:" in printed and "mean vs diffusionnet 1.00" in printed
+    assert "edgefieldnet:" in printed and "diffusionnet-nodropout: " in printed
+    assert "mean vs diffusionnet-nodropout 1.00" in printed
+
+
+def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(bench):
+    """DiffusionNet's public classification script builds it without dropout: the default
+    baseline; ``diffusionnet`` keeps the class's default, dropout 0.5 in every block's MLP."""
+    assert bench.BASELINE == "diffusionnet-nodropout"
+    assert bench.DEFAULT_MODELS == ("edgefieldnet", bench.BASELINE)
+
+    def dropouts(name):
+        return [m.p for m in bench.MODELS[name](16, 19).modules() if isinstance(m, torch.nn.Dropout)]
+
+    assert dropouts(bench.BASELINE) == []
+    assert dropouts("diffusionnet") == [0.5] * 8  # 4 blocks, 2 hidden layers each
+    assert bench._base({"edgefieldnet", "diffusionnet", bench.BASELINE}) == bench.BASELINE
+    assert bench._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
 
 
 @pytest.mark.slow

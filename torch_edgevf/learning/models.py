@@ -503,10 +503,12 @@ class DiffusionNet(nn.Module):
     """DiffusionNet (Sharp et al. 2022), the vertex-based reference (see the module docstring).
 
     Needs ``batch.vertex_gradient`` (``compute_operators(..., vertex_gradient=True)``) and
-    the eigenpairs of the cotangent Laplacian. Defaults are those of the paper's
-    classification experiments: width 64, 4 blocks, MLP (64, 64), dropout 0.5, the
-    mean readout, raw features. ``pool``, ``log_features`` and ``head_dropout`` are those
-    of :class:`EdgeFieldNet`, for comparisons with the same readout and inputs.
+    the eigenpairs of the cotangent Laplacian. Defaults are those of the public code's
+    network for classification: width 64, 4 blocks, MLP (64, 64), the mean readout, raw
+    features, and dropout 0.5 in the MLPs, its class's default; its classification
+    script turns the dropout off (``dropout=0.0``). ``pool``, ``log_features`` and
+    ``head_dropout`` are those of :class:`EdgeFieldNet`, for comparisons with the same
+    readout and inputs.
     """
 
     def __init__(
