@@ -418,8 +418,11 @@ README_RECIPES = {
 #: the :func:`label` of their runs
 README_ROWS = {
     ("`EdgeFieldNet(log_features=True)`", "copies"): "edgefieldnet",
-    ("DiffusionNet (written from the paper)", "copies"): "diffusionnet",
-    ("DiffusionNet (written from the paper)", "DiffusionNet's"): "diffusionnet",
+    ("DiffusionNet with dropout 0.5", "copies"): "diffusionnet",
+    ("DiffusionNet with dropout 0.5", "DiffusionNet's"): "diffusionnet",
+    ("DiffusionNet, as its public classification script (no dropout)", "DiffusionNet's"): (
+        "diffusionnet-nodropout"
+    ),
     ("`EdgeFieldNet(log_features=True)`", "DiffusionNet's"): "edgefieldnet",
     ('ablation: without the vector stream (`vector="none"`)', "copies"): "edgefieldnet-scalar",
     ('ablation: vertex gradients instead of edge fields (`vector="vertex"`)', "copies"): (
@@ -436,7 +439,9 @@ README_ROWS = {
     ('ablation: DiffusionNet\'s input and readout (`pool="mean"`, raw HKS)', "DiffusionNet's"): (
         "edgefieldnet-rawmean"
     ),
-    ("DiffusionNet with log-HKS and the mean and deviation readout", "DiffusionNet's"): "diffusionnet-logstd",
+    ("DiffusionNet with dropout 0.5, log-HKS and the mean and deviation readout", "DiffusionNet's"): (
+        "diffusionnet-logstd"
+    ),
 }
 
 
