@@ -14,9 +14,10 @@ threads, one after the other in this process: the 16-scale heat kernel signature
 vertex Laplacian as input (every model is invariant to rigid motions), one mesh per
 optimiser step, Adam at ``1e-3`` halved every 50 epochs, label smoothing 0.2, dropout 0.5
 in the per-vertex MLPs (none in the ``-nodropout`` models: the faithful DiffusionNet is
-built without it, as its public classification script builds it). The accuracy reported is the one after the final epoch (no model
-selection on the test set); each run also reports that of its weights averaged over the
-last ``--average`` epochs (default 10, the epochs after the rate is halved).
+built without it, as its public classification script builds it). The accuracy reported
+is the one after the final epoch (no model selection on the test set); each run also
+reports that of its weights averaged over the last ``--average`` epochs (default 10, the
+epochs after the rate is halved).
 
 ``--augment K`` gives every model in the run the same K stretched copies of each training
 mesh (a random anisotropic stretch by factors up to 1.25, or ``--stretch S``, the copy
