@@ -423,6 +423,7 @@ README_ROWS = {
     ("DiffusionNet, as its public classification script (no dropout)", "DiffusionNet's"): (
         "diffusionnet-nodropout"
     ),
+    ("DiffusionNet, as its public classification script (no dropout)", "copies"): "diffusionnet-nodropout",
     ("`EdgeFieldNet(log_features=True)`", "DiffusionNet's"): "edgefieldnet",
     ('ablation: without the vector stream (`vector="none"`)', "copies"): "edgefieldnet-scalar",
     ('ablation: vertex gradients instead of edge fields (`vector="vertex"`)', "copies"): (
