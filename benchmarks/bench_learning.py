@@ -668,7 +668,8 @@ def main(argv=None) -> list[dict]:
         type=int,
         default=0,
         metavar="N",
-        help="only time training steps on every 38th mesh (N meshes), the models alternated, and exit",
+        help="only time training steps on every 38th mesh (N meshes), the models alternated, and exit "
+        "(with --json: the seconds per step of every round, per model)",
     )
     p.add_argument(
         "--precompute-time",
@@ -754,7 +755,13 @@ def main(argv=None) -> list[dict]:
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.1f}" for t in ts)
             print(f"{name}: {ms} ms per step; mean vs {against} {statistics.mean(ts) / base:.2f}")
-        return [{"model": n, "seconds_per_step": ts} for n, ts in times.items()]
+        measured = [
+            {"model": n, "seconds_per_step": ts, "meshes": len(batches), "threads": a.threads}
+            for n, ts in times.items()
+        ]
+        if a.json:
+            Path(a.json).write_text(json.dumps(measured, indent=1) + "\n")
+        return measured
     if computed:
         done = f"{len(computed)} computed, {statistics.mean(computed):.3f} s per mesh computed"
     else:

@@ -108,10 +108,14 @@ def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
 
 @pytest.mark.slow
 def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, capsys):
-    results = bench.main(["--step-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
+    out = tmp_path / "steps.json"
+    argv = ["--step-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1", "--json", str(out)]
+    results = bench.main(argv)
     assert [r["model"] for r in results] == ["edgefieldnet", "diffusionnet-nodropout"]
     for r in results:
         assert len(r["seconds_per_step"]) == 3 and all(0 < t < 60 for t in r["seconds_per_step"])
+        assert r["meshes"] == 2 and r["threads"] == 1
+    assert json.loads(out.read_text()) == results
     printed = capsys.readouterr().out
     assert "edgefieldnet:" in printed and "diffusionnet-nodropout: " in printed
     assert "mean vs diffusionnet-nodropout 1.00" in printed
@@ -450,7 +454,8 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     """Every cell of the README's learning table comes from the saved runs: the fixed split's
     mean and deviation over seeds 0-2 (and over seeds 0-5 where they were run), each seed's
     mean and deviation over the 5 folds (every seed whose 5 folds were run), "not run"
-    where there are none, and the parameters."""
+    where there are none, and the parameters; the time per step from the saved
+    ``--step-time`` measurement, as a ratio to the faithful DiffusionNet's."""
     root = BENCH.parents[1]
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
     readme = (root / "README.md").read_text()
@@ -470,9 +475,14 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     def mean_std(xs: list[float]) -> str:
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
-    for model, recipe, fixed_cell, cross_cell, _, parameters in rows:
+    steps = {
+        r["model"]: statistics.mean(r["seconds_per_step"])
+        for r in json.loads((root / "benchmarks/results/bench_learning_step_times.json").read_text())
+    }
+    for model, recipe, fixed_cell, cross_cell, time_cell, parameters in rows:
         assert recipe in README_RECIPES, recipe
         name = README_ROWS[key(model, recipe)] + README_RECIPES[recipe]
+        assert time_cell == f"{steps[README_ROWS[key(model, recipe)]] / steps[bench.BASELINE]:.2f}", name
         mine = [r for r in runs if bench.label(r) == name]
         seeds = sorted((r["seed"], r["test_accuracy"]) for r in mine if r["split"] == "fixed")
         fixed = [a for _, a in seeds]

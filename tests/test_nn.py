@@ -258,6 +258,66 @@ def test_normalize_modulus():
     torch.testing.assert_close(enn.ModulusNorm()(z, w, batch), enn.normalize_modulus(z, w, batch))
 
 
+# --------------------------------------------------------------------------- dropout
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("p", [0.5, 0.1, 0.7, 1e-9])
+@pytest.mark.parametrize("transposed", [False, True])
+def test_dropout_is_torch_dropout_seed_for_seed(dtype, p, transposed):
+    """The same outputs, gradients and generator state afterwards as ``F.dropout``."""
+    x = torch.randn(37, 29, dtype=dtype)
+    if transposed:
+        x = x.t()
+    runs = []
+    for fn in (torch.nn.functional.dropout, enn.dropout):
+        xg = x.clone().requires_grad_()
+        torch.manual_seed(3)
+        out = fn(xg, p, True)
+        (out * torch.arange(out.numel(), dtype=dtype).view_as(out)).sum().backward()
+        runs.append((out.detach(), xg.grad, torch.rand(4)))
+    for a, b in zip(*runs):
+        assert torch.equal(a, b)
+    kept = (runs[1][0] != 0).double().mean()
+    assert abs(float(kept) - (1 - p)) < 0.05
+
+
+def test_dropout_module_and_the_cases_it_leaves_to_torch():
+    x = torch.randn(50, 8, dtype=torch.float64)
+    layer = enn.Dropout(0.5)
+    torch.manual_seed(0)
+    a = layer(x)
+    torch.manual_seed(0)
+    assert torch.equal(a, torch.nn.Dropout(0.5)(x))
+    assert torch.equal(layer.eval()(x), x)
+    assert torch.equal(enn.dropout(x, 0.0), x)
+    assert torch.equal(enn.dropout(x, 1.0), torch.zeros_like(x))
+    # complex entries are kept or dropped whole, with the mask of their real parts
+    z = _z(50, 8)
+    torch.manual_seed(0)
+    a = enn.dropout(z, 0.5)
+    torch.manual_seed(0)
+    assert torch.equal(a.real, enn.dropout(z.real, 0.5)) and torch.equal(a.imag == 0, a.real == 0)
+    phases = _phases(50)[:, None]
+    torch.manual_seed(0)
+    b = enn.dropout(z * phases, 0.5)
+    torch.testing.assert_close(b, a * phases)  # gauge equivariant
+    before = x.clone()
+    enn.dropout(x, 0.5)
+    assert torch.equal(x, before)  # the input is left alone
+    for bad in (-0.1, 1.5, True, "a"):
+        with pytest.raises(ValueError, match="p must be a probability"):
+            enn.dropout(x, bad)
+    with pytest.raises(ValueError, match="x must be a floating or complex tensor"):
+        enn.dropout(torch.ones(3, dtype=torch.int64), 0.5)
+
+
+def test_networks_use_the_fast_dropout():
+    for net in (models.EdgeFieldNet(4, 3, head_dropout=0.5, vector_dropout=0.5), models.DiffusionNet(4, 3)):
+        layers = [m for m in net.modules() if isinstance(m, torch.nn.Dropout)]
+        assert layers and all(isinstance(m, enn.Dropout) for m in layers)
+
+
 # --------------------------------------------------------------------------- pooling
 
 

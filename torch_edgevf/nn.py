@@ -4,6 +4,7 @@ from .learning.layers import (
     MIN_TIME,
     ComplexLinear,
     DivergenceFeatures,
+    Dropout,
     EdgePooling,
     GradientFeatures,
     InvariantReadout,
@@ -12,6 +13,7 @@ from .learning.layers import (
     ModulusNorm,
     complex_linear,
     divergence_features,
+    dropout,
     gradient_features,
     implicit_diffusion,
     invariant_features,
@@ -46,4 +48,6 @@ __all__ = [
     "InvariantReadout",
     "EdgePooling",
     "ModulusNorm",
+    "dropout",
+    "Dropout",
 ]

@@ -42,6 +42,7 @@ from torch import nn
 
 from .layers import (
     ComplexLinear,
+    Dropout,
     InvariantReadout,
     LearnedDiffusion,
     ModReLU,
@@ -99,7 +100,7 @@ def mini_mlp(sizes, dropout: float = 0.5) -> nn.Sequential:
     layers: list[nn.Module] = []
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
         if dropout > 0 and i > 0:
-            layers.append(nn.Dropout(dropout))
+            layers.append(Dropout(dropout))
         layers.append(nn.Linear(a, b))
         if i < len(sizes) - 2:
             layers.append(nn.ReLU())
@@ -304,7 +305,7 @@ class EdgeFieldBlock(nn.Module):
             else None
         )
         # created only when used, so that a seed draws the same numbers as without it
-        self.vector_dropout = nn.Dropout(vector_dropout) if vector_dropout > 0 and vector != "none" else None
+        self.vector_dropout = Dropout(vector_dropout) if vector_dropout > 0 and vector != "none" else None
 
     def forward(self, x, z, batch, keep=None):
         xd = _diffuse_vertices(self.diffusion, x, batch)
@@ -451,7 +452,7 @@ class EdgeFieldNet(nn.Module):
             for i in range(num_blocks)
         )
         self.last = _last_layer(width + (vector_width if readout_fields else 0), out_channels, head, pool)
-        self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
+        self.head_dropout = Dropout(head_dropout) if head_dropout > 0 else None
         # created last, so that a seed initialises the rest as without it
         self.field_products = (
             nn.Parameter(torch.randn(vector_width, vector_width, 2) / (2 * vector_width) ** 0.5)
@@ -532,7 +533,7 @@ class DiffusionNet(nn.Module):
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
         self.last = _last_layer(width, out_channels, head, pool)
-        self.head_dropout = nn.Dropout(head_dropout) if head_dropout > 0 else None
+        self.head_dropout = Dropout(head_dropout) if head_dropout > 0 else None
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
