@@ -307,6 +307,10 @@ def test_dropout_module_and_the_cases_it_leaves_to_torch():
     assert torch.equal(layer.eval()(x), x)
     assert torch.equal(enn.dropout(x, 0.0), x)
     assert torch.equal(enn.dropout(x, 1.0), torch.zeros_like(x))
+    torch.manual_seed(0)
+    a = enn.dropout(x, np.float32(0.25))  # any real number
+    torch.manual_seed(0)
+    assert torch.equal(a, torch.nn.functional.dropout(x, 0.25))
     # complex entries are kept or dropped whole, with the mask of their real parts
     z = _z(50, 8)
     torch.manual_seed(0)

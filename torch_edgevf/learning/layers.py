@@ -38,6 +38,7 @@ the operator values.
 from __future__ import annotations
 
 import math
+import numbers
 import warnings
 import weakref
 
@@ -596,8 +597,9 @@ def dropout(x: torch.Tensor, p: float = 0.5, training: bool = True) -> torch.Ten
     rotations. Elsewhere (another device, ``p`` of 0 or 1, evaluation) this is
     ``F.dropout`` itself.
     """
-    if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p <= 1:
+    if isinstance(p, bool) or not isinstance(p, numbers.Real) or not 0 <= p <= 1:
         raise ValueError(f"p must be a probability in [0, 1], got {p!r}")
+    p = float(p)
     if not (x.is_floating_point() or x.is_complex()):
         raise ValueError(f"x must be a floating or complex tensor, got {x.dtype}")
     if not training or p == 0 or p == 1 or x.device.type != "cpu":
