@@ -481,8 +481,9 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     }
     for model, recipe, fixed_cell, cross_cell, time_cell, parameters in rows:
         assert recipe in README_RECIPES, recipe
-        name = README_ROWS[key(model, recipe)] + README_RECIPES[recipe]
-        assert time_cell == f"{steps[README_ROWS[key(model, recipe)]] / steps[bench.BASELINE]:.2f}", name
+        network = README_ROWS[key(model, recipe)]
+        name = network + README_RECIPES[recipe]
+        assert time_cell == f"{steps[network] / steps[bench.BASELINE]:.2f}", name
         mine = [r for r in runs if bench.label(r) == name]
         seeds = sorted((r["seed"], r["test_accuracy"]) for r in mine if r["split"] == "fixed")
         fixed = [a for _, a in seeds]
