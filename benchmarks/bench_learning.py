@@ -7,6 +7,8 @@ One command reproduces the learning table of the README::
     python benchmarks/bench_learning.py --data psb_watertight_2k.npz --folds 5 --only-folds 0,1 \\
         --json folds01.json                                                     # part of one CV
     python benchmarks/bench_learning.py --table folds01.json folds234.json      # the table of saved runs
+    python benchmarks/bench_learning.py --table runs.json --paired "edgefieldnet, averaged last 10"
+                                                        # and every row against one, fold by fold
     python benchmarks/bench_learning.py --quick                                 # a small smoke run
 
 Every model is trained with the same recipe, on the same operators, inputs, seeds and
@@ -131,6 +133,8 @@ VERTEX_LAPLACIANS = ("cotan", "robust")
 STRETCH = 1.25
 #: epochs whose final weights are averaged (those after the learning rate is halved at 50)
 AVERAGE_EPOCHS = 10
+#: the row of the recommended recipe (``--augment 4``, averaged weights; see :func:`label`)
+RECOMMENDED = f"edgefieldnet, 4 stretched copies, averaged last {AVERAGE_EPOCHS}"
 #: learning-rate schedules: halved every 50 epochs (DiffusionNet's), or a cosine decay to 0
 SCHEDULES = ("step", "cosine")
 
@@ -580,6 +584,59 @@ def table(results: list[dict], models_run=None) -> str:
     return "\n".join(lines)
 
 
+def paired_table(results: list[dict], reference: str, folds: int | None = None) -> str:
+    """Markdown: every row against ``reference`` (a :func:`label`) on the folds both ran.
+
+    The folds are paired by seed and fold. Per row: how many folds it shares with the
+    reference, the mean over them of the reference's test accuracy minus the row's, in
+    points, on how many the reference is ahead, level and behind, and the two-sided p-value
+    of the corrected resampled t test (Nadeau and Bengio 2003; for repeated K-fold
+    cross-validation, Bouckaert and Frank 2004): the variance of the mean difference over
+    ``n`` folds is taken as ``(1/n + n_test/n_train) s^2``, with ``n_test/n_train = 1/(K-1)``,
+    because the training sets of the folds overlap, and the naive ``s^2/n`` would make
+    small differences look significant. ``folds`` is ``K``; by default one more than the
+    largest fold index of the reference's runs. Rows that share fewer than two folds with
+    the reference are left out.
+    """
+    from scipy import stats  # only the table needs it
+
+    def by_fold(name: str) -> dict[tuple[int, str], float]:
+        return {
+            (r["seed"], r["split"]): r["test_accuracy"]
+            for r in results
+            if label(r) == name and r["split"].startswith("fold")
+        }
+
+    ref = by_fold(reference)
+    if not ref:
+        raise ValueError(f"no cross-validation runs of {reference!r} to pair with")
+    k = folds if folds is not None else 1 + max(int(split[4:]) for _, split in ref)
+    if k < 2:
+        raise ValueError(f"the corrected t test needs at least 2 folds, got {k}")
+    lines = [
+        f"Against {reference}, fold by fold (the reference's accuracy minus the model's):",
+        "",
+        "| model | folds paired | mean difference (points) | reference ahead / level / behind "
+        "| p (corrected t) |",
+        "|---|---:|---:|---|---:|",
+    ]
+    for name in dict.fromkeys(label(r) for r in results):
+        other = by_fold(name)
+        shared = sorted(set(ref) & set(other))
+        if name == reference or len(shared) < 2:
+            continue
+        d = np.array([ref[key] - other[key] for key in shared])
+        n, mean, var = len(d), float(d.mean()), float(d.var(ddof=1))
+        if var > 0:
+            t = mean / np.sqrt((1 / n + 1 / (k - 1)) * var)
+            p = float(2 * stats.t.sf(abs(t), n - 1))
+        else:  # every fold the same difference
+            p = 1.0 if mean == 0 else 0.0
+        counts = f"{int((d > 0).sum())} / {int((d == 0).sum())} / {int((d < 0).sum())}"
+        lines.append(f"| {name} | {n} | {100 * mean:+.2f} | {counts} | {p:.3f} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> list[dict]:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--data", default=None, help="psb_watertight_2k.npz (default: $TORCH_EDGEVF_PSB)")
@@ -689,10 +746,22 @@ def main(argv=None) -> list[dict]:
     p.add_argument(
         "--table", nargs="+", metavar="JSON", help="print the table of saved --json results and exit"
     )
+    p.add_argument(
+        "--paired",
+        default=None,
+        metavar="ROW",
+        help="with --table: also every row against ROW (a row's name) on the folds both ran, "
+        "with the p-value of the corrected resampled t test (--folds: K, by default from the runs)",
+    )
     a = p.parse_args(argv)
+    if a.paired and not a.table:
+        p.error("--paired compares saved runs: give them with --table")
     if a.table:
         results = [r for f in a.table for r in json.loads(Path(f).read_text())]
         print(table(with_averaged(results)))
+        if a.paired:
+            print()
+            print(paired_table(with_averaged(results), a.paired, a.folds or None))
         return results
     names = [m for m in a.models.split(",") if m]
     unknown = sorted(set(names) - set(MODELS))

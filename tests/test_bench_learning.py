@@ -95,6 +95,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--weight-decay", "nan"], "--weight-decay must be 0"),
         (["--weight-decay", "inf"], "--weight-decay must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
+        (["--paired", "m"], "--paired compares saved runs"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
 )
@@ -167,6 +168,44 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
     assert cells[1:4] == ["0.500 ± 0.000 (n=1)", "0.500 ± 0.354 (n=2)", "1.000 ± 0.000 (n=1)"]
     assert "own split" not in bench.table(rows[:3], ["m"]).splitlines()[0]
+
+
+def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
+    """Rows are paired with the reference by seed and fold; the p-value is that of the
+    corrected resampled t test, here worked out by hand: differences 1..5 points over 5
+    folds of K = 5 give t = 0.03 / sqrt((1/5 + 1/4) 2.5e-4) = 2.828 on 4 degrees of
+    freedom, p = 0.047 (the naive t test would give 0.016)."""
+
+    def run(model, seed, fold, acc, split=None):
+        return dict(model=model, seed=seed, split=split or f"fold{fold}", test_accuracy=acc)
+
+    ref = [run("ref", s, k, 0.9) for s in (0, 1) for k in range(5)]
+    better = [run("b", 0, k, 0.9 - (k + 1) / 100) for k in range(5)]  # seed 0 only: 5 pairs
+    level = [run("c", s, k, 0.9) for s in (0, 1) for k in range(5)]
+    step = [run("d", s, k, 0.85) for s in (0, 1) for k in range(5)]  # the same difference everywhere
+    lone = [run("e", 0, 0, 0.5), run("e", 0, 0, 0.5, split="fixed")]  # one fold: left out
+    lines = bench.paired_table(ref + better + level + step + lone, "ref").splitlines()
+    rows = {c[0]: c[1:] for c in ([x.strip() for x in line.strip("|").split("|")] for line in lines[4:])}
+    assert set(rows) == {"b", "c", "d"}
+    assert rows["b"] == ["5", "+3.00", "5 / 0 / 0", "0.047"]
+    assert rows["c"] == ["10", "+0.00", "0 / 10 / 0", "1.000"]
+    assert rows["d"] == ["10", "+5.00", "10 / 0 / 0", "0.000"]
+    # K from the argument: more folds, smaller correction, smaller p
+    assert float(bench.paired_table(ref + better, "ref", folds=10).splitlines()[-1].split("|")[-2]) < 0.047
+    with pytest.raises(ValueError, match="no cross-validation runs of 'x'"):
+        bench.paired_table(ref, "x")
+    with pytest.raises(ValueError, match="at least 2 folds"):
+        bench.paired_table(ref, "ref", folds=1)
+
+
+def test_report_paired_table_is_that_of_the_saved_runs(bench, capsys):
+    """The report's fold-by-fold comparison is what ``--table ... --paired`` prints."""
+    root = BENCH.parents[1]
+    runs = root / "benchmarks/results/bench_learning_runs.json"
+    bench.main(["--table", str(runs), "--paired", bench.RECOMMENDED])
+    printed = capsys.readouterr().out
+    paired = printed[printed.index("Against ") :].strip()
+    assert paired in (root / "benchmarks/results/bench_learning.md").read_text()
 
 
 def test_vertex_laplacian_options_and_rows(bench):
