@@ -208,6 +208,29 @@ def test_report_paired_table_is_that_of_the_saved_runs(bench, capsys):
     assert paired in (root / "benchmarks/results/bench_learning.md").read_text()
 
 
+#: the p-values the README quotes, against the recommended network: (row, as the README says it)
+README_P_VALUES = [
+    ("diffusionnet-nodropout", "p = {} against the faithful DiffusionNet's own recipe"),
+    ("diffusionnet-nodropout, 4 stretched copies, averaged last 10", "{} against it trained alike"),
+    ("diffusionnet, 4 stretched copies, averaged last 10", "{} against DiffusionNet with dropout"),
+    ("edgefieldnet-vertexvec, 4 stretched copies, averaged last 10", "vertex gradients p = {}"),
+    ("edgefieldnet-fixedtime, 4 stretched copies, averaged last 10", "times not learned p = {}"),
+    ("edgefieldnet-scalar, 4 stretched copies, averaged last 10", "vector stream p = {}"),
+]
+
+
+def test_readme_p_values_are_those_of_the_saved_runs(bench):
+    """The p-values in the README's reading are those of ``--paired`` on the saved runs
+    (to two significant digits)."""
+    root = BENCH.parents[1]
+    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
+    lines = bench.paired_table(runs, bench.RECOMMENDED).splitlines()[4:]
+    p = {c[0]: float(c[-1]) for c in ([x.strip() for x in line.strip("|").split("|")] for line in lines)}
+    readme = " ".join((root / "README.md").read_text().split())  # lines joined
+    for row, phrase in README_P_VALUES:
+        assert phrase.format(f"{p[row]:.2g}") in readme, row
+
+
 def test_vertex_laplacian_options_and_rows(bench):
     assert bench.operator_options() == bench.OPERATOR_OPTIONS  # the cache keys of cotan runs unchanged
     assert bench.operator_options("robust")["vertex_laplacian"] == "robust"
