@@ -124,7 +124,8 @@ def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, 
 
 def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(bench):
     """DiffusionNet's public classification script builds it without dropout: the default
-    baseline; ``diffusionnet`` keeps the class's default, dropout 0.5 in every block's MLP."""
+    baseline; ``diffusionnet`` keeps the class's default, dropout 0.5 in every block's MLP.
+    The ``-nodropout`` edge-field networks have none either."""
     assert bench.BASELINE == "diffusionnet-nodropout"
     assert bench.DEFAULT_MODELS == ("edgefieldnet", bench.BASELINE)
 
@@ -133,6 +134,8 @@ def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(ben
 
     assert dropouts(bench.BASELINE) == []
     assert dropouts("diffusionnet") == [0.5] * 8  # 4 blocks, 2 hidden layers each
+    assert dropouts("edgefieldnet-nodropout") == dropouts("edgefieldnet-vec8-nodropout") == []
+    assert dropouts("edgefieldnet") == [0.5] * 6  # 3 blocks, 2 hidden layers each
     assert bench._base({"edgefieldnet", "diffusionnet", bench.BASELINE}) == bench.BASELINE
     assert bench._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
 
