@@ -604,14 +604,12 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
     """
     from scipy import stats  # only the table needs it
 
-    def by_fold(name: str) -> dict[tuple[int, str], float]:
-        return {
-            (r["seed"], r["split"]): r["test_accuracy"]
-            for r in results
-            if label(r) == name and r["split"].startswith("fold")
-        }
-
-    ref = by_fold(reference)
+    by_fold: dict[str, dict[tuple[int, str], float]] = {}  # row: (seed, fold): accuracy
+    for r in results:
+        accuracies = by_fold.setdefault(label(r), {})
+        if r["split"].startswith("fold"):
+            accuracies[(r["seed"], r["split"])] = r["test_accuracy"]
+    ref = by_fold.get(reference)
     if not ref:
         raise ValueError(f"no cross-validation runs of {reference!r} to pair with")
     k = folds if folds is not None else 1 + max(int(split[4:]) for _, split in ref)
@@ -624,8 +622,7 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
         "| p (corrected t) |",
         "|---|---:|---:|---|---:|",
     ]
-    for name in dict.fromkeys(label(r) for r in results):
-        other = by_fold(name)
+    for name, other in by_fold.items():
         shared = sorted(set(ref) & set(other))
         if name == reference or len(shared) < 2:
             continue

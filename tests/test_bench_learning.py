@@ -173,6 +173,12 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     assert "own split" not in bench.table(rows[:3], ["m"]).splitlines()[0]
 
 
+def _paired_rows(markdown: str) -> dict[str, list[str]]:
+    """The rows of a :func:`paired_table`: model name -> its other cells."""
+    cells = ([c.strip() for c in line.strip("|").split("|")] for line in markdown.splitlines())
+    return {c[0]: c[1:] for c in cells if len(c) > 1 and c[0] not in ("model", "---")}
+
+
 def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
     """Rows are paired with the reference by seed and fold; the p-value is that of the
     corrected resampled t test, here worked out by hand: differences 1..5 points over 5
@@ -187,14 +193,13 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
     level = [run("c", s, k, 0.9) for s in (0, 1) for k in range(5)]
     step = [run("d", s, k, 0.85) for s in (0, 1) for k in range(5)]  # the same difference everywhere
     lone = [run("e", 0, 0, 0.5), run("e", 0, 0, 0.5, split="fixed")]  # one fold: left out
-    lines = bench.paired_table(ref + better + level + step + lone, "ref").splitlines()
-    rows = {c[0]: c[1:] for c in ([x.strip() for x in line.strip("|").split("|")] for line in lines[4:])}
+    rows = _paired_rows(bench.paired_table(ref + better + level + step + lone, "ref"))
     assert set(rows) == {"b", "c", "d"}
     assert rows["b"] == ["5", "+3.00", "5 / 0 / 0", "0.047"]
     assert rows["c"] == ["10", "+0.00", "0 / 10 / 0", "1.000"]
     assert rows["d"] == ["10", "+5.00", "10 / 0 / 0", "0.000"]
     # K from the argument: more folds, smaller correction, smaller p
-    assert float(bench.paired_table(ref + better, "ref", folds=10).splitlines()[-1].split("|")[-2]) < 0.047
+    assert float(_paired_rows(bench.paired_table(ref + better, "ref", folds=10))["b"][-1]) < 0.047
     with pytest.raises(ValueError, match="no cross-validation runs of 'x'"):
         bench.paired_table(ref, "x")
     with pytest.raises(ValueError, match="at least 2 folds"):
@@ -227,8 +232,10 @@ def test_readme_p_values_are_those_of_the_saved_runs(bench):
     (to two significant digits)."""
     root = BENCH.parents[1]
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    lines = bench.paired_table(runs, bench.RECOMMENDED).splitlines()[4:]
-    p = {c[0]: float(c[-1]) for c in ([x.strip() for x in line.strip("|").split("|")] for line in lines)}
+    p = {
+        name: float(cells[-1])
+        for name, cells in _paired_rows(bench.paired_table(runs, bench.RECOMMENDED)).items()
+    }
     readme = " ".join((root / "README.md").read_text().split())  # lines joined
     for row, phrase in README_P_VALUES:
         assert phrase.format(f"{p[row]:.2g}") in readme, row
