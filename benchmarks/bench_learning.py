@@ -509,8 +509,8 @@ def precompute_times(
 
 def label(r: dict) -> str:
     """The row of a run: its model, the vertex Laplacian when it is not the cotangent one,
-    the augmentation if any, and whether the accuracy is that of the averaged weights
-    (see :func:`with_averaged`)."""
+    the augmentation, weight decay, schedule and ``--tag`` if any, and whether the
+    accuracy is that of the averaged weights (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
     if r.get("augment"):
@@ -521,6 +521,8 @@ def label(r: dict) -> str:
         name += f", weight decay {r['weight_decay']:g}"
     if r.get("schedule", "step") != "step":
         name += f", {r['schedule']} schedule"
+    if r.get("tag"):
+        name += f", {r['tag']}"
     return f"{name}, averaged last {r['average_epochs']}" if r.get("averaged") else name
 
 
@@ -705,6 +707,11 @@ def main(argv=None) -> list[dict]:
         choices=SCHEDULES,
         help="learning rate halved every 50 epochs (step, default) or a cosine decay to 0",
     )
+    p.add_argument(
+        "--tag",
+        default=None,
+        help="a label for the runs of this call, shown in their table row (e.g. a code version)",
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--vertex-laplacian",
@@ -878,6 +885,8 @@ def main(argv=None) -> list[dict]:
                     r["weight_decay"] = a.weight_decay
                 if a.schedule != "step":
                     r["schedule"] = a.schedule
+                if a.tag:
+                    r["tag"] = a.tag
                 print(json.dumps(r), flush=True)
                 results.append(r)
                 if a.json:

@@ -128,6 +128,36 @@ def _csr_pair(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return pair
 
 
+#: ``G^H Phi`` per pair of constant operators (see :func:`adjoint_on_basis`)
+_BASIS_CACHE: dict[tuple[int, int], torch.Tensor] = {}
+
+
+def adjoint_on_basis(G: torch.Tensor, evecs: torch.Tensor) -> torch.Tensor:
+    r"""``G^H Phi`` (``(V, k)``): the adjoint of the gradient applied to each column of ``Phi``.
+
+    For edge fields ``u = Phi c`` in the span of an ``M_z``-orthonormal basis ``Phi``
+    (``(E, k)``), the divergence and curl ``-M_v^{-1} G^* u`` are ``-M_v^{-1} (G^H Phi) c``,
+    and the coefficients of a gradient field, ``Phi^H M_z (M_z^{-1} G f)``, are
+    ``(G^H Phi)^H f``: one dense ``(V, k)`` matrix replaces both sparse products. For a
+    batch, ``G`` is block diagonal and ``Phi`` stacks the meshes' bases row-wise, so the
+    rows of mesh ``b`` are ``G_b^H Phi_b``.
+
+    When neither ``G`` nor ``evecs`` needs a gradient (precomputed operators), the
+    product is computed once per pair of tensors and kept while both exist; otherwise it
+    is computed at each call and differentiable in both.
+    """
+    if G.requires_grad or evecs.requires_grad:
+        return _spmm(G, evecs, adjoint=True)
+    key = (id(G), id(evecs))
+    out = _BASIS_CACHE.get(key)
+    if out is None:
+        out = _spmm(G, evecs, adjoint=True)
+        _BASIS_CACHE[key] = out
+        weakref.finalize(G, _BASIS_CACHE.pop, key, None)
+        weakref.finalize(evecs, _BASIS_CACHE.pop, key, None)
+    return out
+
+
 class _ConstantSpmm(torch.autograd.Function):
     """``A @ x`` for a constant sparse ``A`` given as CSR ``A`` and ``A^H``; gradient ``A^H g``."""
 

@@ -46,6 +46,7 @@ from .layers import (
     InvariantReadout,
     LearnedDiffusion,
     ModReLU,
+    adjoint_on_basis,
     complex_linear,
     divergence_features,
     gradient_features,
@@ -189,6 +190,25 @@ def _symlog(x: torch.Tensor) -> torch.Tensor:
     return torch.sign(x) * torch.log1p(x.abs())
 
 
+def _mesh_slices(offsets) -> list[slice]:
+    o = [int(i) for i in offsets]
+    return [slice(a, b) for a, b in zip(o[:-1], o[1:])]
+
+
+def _synthesize(c: torch.Tensor, batch) -> torch.Tensor:
+    """Edge fields ``Phi c`` from coefficients ``(B, k, C)`` in each mesh's edge eigenbasis."""
+    phi = batch.edge_evecs
+    parts = [phi[s].to(c.dtype) @ c[b] for b, s in enumerate(_mesh_slices(batch.edge_offsets))]
+    return parts[0] if len(parts) == 1 else torch.cat(parts, dim=0)
+
+
+def _project(z: torch.Tensor, batch) -> torch.Tensor:
+    """Coefficients ``Phi^H M_z z`` ``(B, k, C)`` of edge fields ``z`` in each mesh's eigenbasis."""
+    x = z * batch.edge_mass.to(z.real.dtype)[:, None]
+    phi = batch.edge_evecs
+    return torch.stack([phi[s].to(x.dtype).mH @ x[s] for s in _mesh_slices(batch.edge_offsets)])
+
+
 # --------------------------------------------------------------------------- edge fields alone
 
 
@@ -307,7 +327,16 @@ class EdgeFieldBlock(nn.Module):
         # created only when used, so that a seed draws the same numbers as without it
         self.vector_dropout = Dropout(vector_dropout) if vector_dropout > 0 and vector != "none" else None
 
+    @property
+    def spectral(self) -> bool:
+        """Whether the block works on the coefficients of its fields (see :meth:`forward_spectral`)."""
+        return self.vector == "edge" and self.high_pass is None
+
     def forward(self, x, z, batch, keep=None):
+        if self.spectral:
+            c = None if z is None or self.mix is None else _project(z, batch)
+            x, _, u = self.forward_spectral(x, c, batch, keep)
+            return x, z if u is None else (u if z is None else z + u)
         xd = _diffuse_vertices(self.diffusion, x, batch)
         feats = [x, xd]
         if self.vector != "none" and keep is not None and not bool(keep.any()):
@@ -339,11 +368,61 @@ class EdgeFieldBlock(nn.Module):
             if self.vector == "edge":
                 dc = divergence_features(u, batch.gradient, batch.vertex_mass)
                 vec += [torch.tanh(dc.real), torch.tanh(dc.imag)]
-            if self.vector_dropout is not None:
-                vec = [self.vector_dropout(t) for t in vec]
-            feats += vec
+            feats += self._dropped(vec)
             z = u if z is None else z + u
         return x + self.mlp(torch.cat(feats, dim=1)), z
+
+    def forward_spectral(self, x, c, batch, keep=None):
+        """The block on the coefficients of the fields in the edge eigenbasis (``vector="edge"``).
+
+        Without ``high_pass``, the block's fields are those of the ``L_c`` diffusion, so
+        they lie in the span of the ``M_z``-orthonormal eigenbasis ``Phi`` of each mesh:
+        ``u = Phi c`` with ``c = diag(e^{-lambda t}) (Phi^H G a + c_prev A_mix)``, the
+        gradient part through ``Phi^H M_z M_z^{-1} G = (G^H Phi)^H``
+        (:func:`~torch_edgevf.learning.layers.adjoint_on_basis`), and the divergence and
+        curl are ``-M_v^{-1} (G^H Phi) c``. These are the numbers of :meth:`forward` up to
+        rounding, without its sparse products and projections on the edges.
+
+        Parameters
+        ----------
+        x : (V, C) scalars
+        c : (B, k, C_v) complex tensor or None, the coefficients of the fields of the
+            previous blocks (their sum)
+        batch, keep : as in :meth:`forward`
+
+        Returns
+        -------
+        ``(x, c_new, u)``: the new scalars, the coefficients ``(B, k, C_v)`` of this
+        block's fields and the fields ``Phi c_new`` ``(E, C_v)`` (both None when no mesh
+        uses the vector stream).
+        """
+        if not self.spectral:
+            raise ValueError("forward_spectral needs vector='edge' and high_pass=False")
+        xd = _diffuse_vertices(self.diffusion, x, batch)
+        feats = [x, xd]
+        if keep is not None and not bool(keep.any()):
+            feats.append(x.new_zeros(x.shape[0], self.vector_features))
+            return x + self.mlp(torch.cat(feats, dim=1)), None, None
+        a = torch.view_as_complex(self.lift(xd).unflatten(1, (self.vector_width, 2)).contiguous())
+        basis = adjoint_on_basis(batch.gradient, batch.edge_evecs).to(a.dtype)  # (V, k): G^H Phi
+        meshes = _mesh_slices(batch.vertex_offsets)
+        new = torch.stack([basis[s].mH @ a[s] for s in meshes])
+        if c is not None and self.mix is not None:
+            new = new + self.mix(c.flatten(0, 1)).unflatten(0, c.shape[:2])
+        if keep is not None and not bool(keep.all()):
+            new = new * keep.to(new.real.dtype)[:, None, None]
+        t = self.field_diffusion.times.to(new.real.dtype)
+        new = new * torch.exp(-batch.edge_evals.to(t.dtype)[:, :, None] * t)
+        u = _synthesize(new, batch)
+        parts = [basis[s] @ new[b] for b, s in enumerate(meshes)]
+        dc = -(parts[0] if len(parts) == 1 else torch.cat(parts, dim=0))
+        dc = dc * batch.vertex_mass.to(dc.real.dtype).reciprocal()[:, None]
+        vec = [_vertex_invariants(u, self.products, batch, "edge"), torch.tanh(dc.real), torch.tanh(dc.imag)]
+        feats += self._dropped(vec)
+        return x + self.mlp(torch.cat(feats, dim=1)), new, u
+
+    def _dropped(self, vec: list[torch.Tensor]) -> list[torch.Tensor]:
+        return vec if self.vector_dropout is None else [self.vector_dropout(t) for t in vec]
 
 
 class EdgeFieldNet(nn.Module):
@@ -433,7 +512,7 @@ class EdgeFieldNet(nn.Module):
             raise ValueError(f"readout_fields must be True or False, got {readout_fields!r}")
         if readout_fields and vector == "none":
             raise ValueError("readout_fields needs a vector stream; vector='none' has none")
-        self.stream_dropout = stream_dropout
+        self.stream_dropout, self.high_pass = stream_dropout, high_pass
         self.in_channels, self.head, self.vector = in_channels, head, vector
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
@@ -474,8 +553,17 @@ class EdgeFieldNet(nn.Module):
         keep = None
         if self.training and self.stream_dropout > 0:
             keep = torch.rand(batch.num_meshes, device=x.device) >= self.stream_dropout
-        for block in self.blocks:
-            x, z = block(x, z, batch, keep)
+        if self.vector == "edge" and not self.high_pass:
+            # the fields as coefficients in the edge eigenbasis (EdgeFieldBlock.forward_spectral)
+            c = None
+            for block in self.blocks:
+                x, new, _ = block.forward_spectral(x, c, batch, keep)
+                if new is not None:
+                    c = new if c is None else c + new
+            z = None if c is None else _synthesize(c, batch)
+        else:
+            for block in self.blocks:
+                x, z = block(x, z, batch, keep)
         if self.field_products is not None:
             x = torch.cat([x, self._field_readout(z, batch, self.field_products)], dim=1)
         return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
