@@ -132,6 +132,81 @@ def test_edge_field_block_gradcheck(mesh, high_pass):
         assert torch.autograd.gradcheck(g_, (w0,))
 
 
+def _block_on_the_edges(block, x, z, batch, keep=None):
+    """The block as its formula reads, every field on the edges (a reference for the
+    eigenbasis path of :meth:`EdgeFieldBlock.forward`)."""
+    L = models  # the layer functions the models import
+    xd = L._diffuse_vertices(block.diffusion, x, batch)
+    a = torch.view_as_complex(block.lift(xd).unflatten(1, (block.vector_width, 2)).contiguous())
+    u = L.gradient_features(a, batch.gradient, batch.edge_mass)
+    if z is not None and block.mix is not None:
+        u = u + block.mix(z)
+    if keep is not None:
+        u = u * keep[batch.edge_batch].to(u.real.dtype)[:, None]
+    ud = block.field_diffusion(
+        u, batch.edge_mass, evals=batch.edge_evals, evecs=batch.edge_evecs, offsets=batch.edge_offsets
+    )
+    inv = torch.tanh((ud * L.complex_linear(ud, block.products).conj()).real)
+    inv = L.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    dc = L.divergence_features(ud, batch.gradient, batch.vertex_mass)
+    feats = [x, xd, inv, torch.tanh(dc.real), torch.tanh(dc.imag)]
+    return x + block.mlp(torch.cat(feats, dim=1)), ud if z is None else z + ud
+
+
+@pytest.mark.parametrize("keep", [None, [True, False]])
+def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh, keep):
+    """The block works on the fields' coefficients in the edge eigenbasis: the same numbers
+    as every field on the edges, on a batch of two meshes, with and without a mesh whose
+    vector stream is dropped, for the scalars, the fields and the gradients."""
+    pair = batching.collate_meshes([_sample(*mesh), _sample(*perturbed_icosphere(1, 0.05, seed=7))])
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0).double()
+    with torch.no_grad():
+        block.diffusion.raw_times.uniform_(0.0, 0.05)
+        block.field_diffusion.raw_times.uniform_(0.01, 0.2)
+    x = torch.randn(pair.num_vertices, 8, dtype=torch.float64, requires_grad=True)
+    z = torch.randn(pair.num_edges, 4, dtype=torch.complex128, requires_grad=True)
+    mask = None if keep is None else torch.tensor(keep)
+    got = block(x, z, pair, mask)
+    want = _block_on_the_edges(block, x, z, pair, mask)
+    for g, w in zip(got, want):
+        assert w.abs().max() > 1e-3
+        torch.testing.assert_close(g, w, rtol=1e-10, atol=1e-12)
+    grads = [
+        torch.autograd.grad(sum(t.abs().square().sum() for t in out), (x, z, *block.parameters()))
+        for out in (got, want)
+    ]
+    for g, w in zip(*grads):
+        torch.testing.assert_close(g, w, rtol=1e-9, atol=1e-12)
+
+
+def test_the_network_on_coefficients_is_the_network_on_the_edges(mesh):
+    """EdgeFieldNet carries the fields of its blocks as coefficients; with the high-pass
+    term (zero weight) it carries them on the edges: the same outputs."""
+    batch = _batch(*mesh)
+    torch.manual_seed(0)
+    a = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=3, mlp=(8,), readout_fields=True)
+    torch.manual_seed(0)
+    b = models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=3, mlp=(8,), readout_fields=True, high_pass=True
+    )
+    a, b = a.double().eval(), b.double().eval()
+    with torch.no_grad():
+        for blocks in zip(a.blocks, b.blocks):
+            t = torch.rand(4, dtype=torch.float64) * 0.2
+            for block in blocks:
+                block.field_diffusion.raw_times.copy_(t)
+        torch.testing.assert_close(a(batch), b(batch), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("kwargs", [dict(vector="vertex"), dict(vector="none"), dict(high_pass=True)])
+def test_forward_spectral_needs_edge_fields_without_high_pass(kwargs):
+    block = models.EdgeFieldBlock(4, 2, **kwargs)
+    assert not block.spectral
+    with pytest.raises(ValueError, match="forward_spectral needs"):
+        block.forward_spectral(torch.zeros(3, 4), None, None)
+
+
 def test_high_pass_starts_as_the_network_without_it(mesh):
     """Zero-initialised and drawing no random numbers: the same seed gives the same network."""
     batch = _batch(*mesh)
@@ -140,8 +215,8 @@ def test_high_pass_starts_as_the_network_without_it(mesh):
     torch.manual_seed(0)
     b = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), high_pass=True)
     b = b.double().eval()
-    with torch.no_grad():
-        torch.testing.assert_close(b(batch), a(batch), rtol=0, atol=0)
+    with torch.no_grad():  # the same up to rounding (b carries its fields on the edges)
+        torch.testing.assert_close(b(batch), a(batch), rtol=1e-12, atol=1e-14)
         for block in b.blocks:
             block.high_pass.normal_()
         assert (b(batch) - a(batch)).abs().max() > 1e-6  # and the weight acts

@@ -185,6 +185,42 @@ def test_gradient_and_divergence_features_are_the_quotients_bit_for_bit(mesh, dt
     assert torch.equal(enn.divergence_features(w, G, mv), -_spmm(G, w, adjoint=True) / mv[:, None])
 
 
+def test_adjoint_on_basis_gives_the_gradient_coefficients_and_the_divergence(mesh):
+    """``G^H Phi``: the divergence and curl of fields in the span of an ``M_z``-orthonormal
+    basis, and the coefficients of gradient fields; computed once for constant operators."""
+    from torch_edgevf.learning.layers import _BASIS_CACHE, adjoint_on_basis
+
+    v, topo, m = mesh["v"], mesh["topo"], mesh["m"]
+    G = ev.gradient(v, topo)
+    phi = mesh["evecs"][:, :6].to(G.dtype)
+    mv = ev.vertex_mass(v, topo, lumped=True).values()
+    basis = adjoint_on_basis(G, phi)
+    torch.testing.assert_close(basis, G.to_dense().mH @ phi)
+    c = _z(6, 3)
+    torch.testing.assert_close(-(basis @ c) / mv[:, None], enn.divergence_features(phi @ c, G, mv))
+    f = torch.randn(v.shape[0], 3, dtype=torch.float64)
+    coeffs = phi.mH @ (m[:, None] * enn.gradient_features(f, G, m))
+    torch.testing.assert_close(basis.mH @ f.to(basis.dtype), coeffs)
+    assert adjoint_on_basis(G, phi) is basis  # kept for the pair
+    key = (id(G), id(phi))
+    del G
+    assert key not in _BASIS_CACHE  # and let go with its operator
+
+
+def test_adjoint_on_basis_is_differentiable_in_the_operators(mesh, gradcheck):
+    from torch_edgevf.learning.layers import adjoint_on_basis
+
+    G = ev.gradient(mesh["v"], mesh["topo"]).coalesce()
+    vals = G.values().detach().clone().requires_grad_(True)
+    phi = mesh["evecs"][:, :3].to(G.dtype).clone().requires_grad_(True)
+
+    def f(vals, phi):
+        A = torch.sparse_coo_tensor(G.indices(), vals, G.shape, is_coalesced=True)
+        return torch.view_as_real(adjoint_on_basis(A, phi))
+
+    assert gradcheck(f, (vals, phi))
+
+
 def test_gradient_features_gradcheck(mesh, gradcheck):
     G = ev.gradient(mesh["v"], mesh["topo"])
     f = torch.randn(mesh["v"].shape[0], 2, dtype=torch.float64, requires_grad=True)
@@ -364,6 +400,37 @@ def test_pooling(mesh):
     )
     torch.testing.assert_close(enn.EdgePooling("face")(x, w, face_edges=topo.face_edges), pf)
     torch.testing.assert_close(enn.EdgePooling("global")(x, w), enn.pool_global(x, w))
+
+
+def test_pooling_to_vertices_by_the_cached_matrix_is_the_weighted_mean(mesh):
+    """Constant weights take the cached sparse matrix, weights with a gradient the sums;
+    both give the weighted mean at every vertex, 0 at a vertex without edges, and the
+    same gradient in ``x``."""
+    from torch_edgevf.learning.layers import _POOL_CACHE
+
+    topo = mesh["topo"]
+    n = topo.num_vertices + 1  # one more vertex, on no edge
+    w = mesh["m"].clone()
+    x = torch.randn(topo.num_edges, 3, dtype=torch.float64, requires_grad=True)
+    cached = enn.pool_edges_to_vertices(x, topo.edges, n, w)
+    assert (id(topo.edges), id(w), n) in _POOL_CACHE
+    summed = enn.pool_edges_to_vertices(x, topo.edges, n, w.clone().requires_grad_(True))
+    want = torch.stack(
+        [
+            (w[inc, None] * x[inc]).sum(0) / w[inc].sum() if len(inc) else x.new_zeros(3)
+            for inc in (((topo.edges == v).any(1)).nonzero().flatten() for v in range(n))
+        ]
+    )
+    torch.testing.assert_close(cached, want)
+    torch.testing.assert_close(summed, want)
+    g = torch.randn(n, 3, dtype=torch.float64)
+    for out in (cached, summed):
+        got, ref = (torch.autograd.grad(o, x, g, retain_graph=True)[0] for o in (out, want))
+        torch.testing.assert_close(got, ref)
+    bad = topo.edges.clone()
+    bad[3, 1] = n
+    with pytest.raises(ValueError, match=r"edges must hold vertex indices in \[0, "):
+        enn.pool_edges_to_vertices(x, bad, n, w)
 
 
 # --------------------------------------------------------------------------- errors

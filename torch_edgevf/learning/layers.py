@@ -54,6 +54,7 @@ __all__ = [
     "implicit_diffusion",
     "gradient_features",
     "divergence_features",
+    "adjoint_on_basis",
     "complex_linear",
     "modulus_relu",
     "invariant_features",
@@ -666,7 +667,10 @@ def pool_edges_to_vertices(x, edges, num_vertices: int, weight=None) -> torch.Te
     .. math::  y_v = \frac{\sum_{e \ni v} w_e x_e}{\sum_{e \ni v} w_e}
 
     With ``w = M_z`` (default in the models) this is area weighted. Use it on invariant
-    (real) features: a complex edge feature lives in its edge's frame.
+    (real) features: a complex edge feature lives in its edge's frame. With a ``weight``
+    tensor that needs no gradient (precomputed masses), the mean is one sparse product
+    with the ``(V, E)`` matrix of the ``w_e / sum w``, built once per pair of ``edges``
+    and ``weight`` tensors and kept while both exist.
 
     Parameters
     ----------
@@ -683,6 +687,13 @@ def pool_edges_to_vertices(x, edges, num_vertices: int, weight=None) -> torch.Te
     if not isinstance(edges, torch.Tensor) or edges.shape != (x.shape[0], 2):
         raise ValueError(f"edges must have shape ({x.shape[0]}, 2)")
     w = _check_weight(weight, x.shape[0], x.real if x.is_complex() else x)
+    if (
+        isinstance(weight, torch.Tensor)
+        and w is weight
+        and not (weight.requires_grad or x.is_complex())
+        and edges.device == x.device == weight.device
+    ):
+        return _spmm(_pooling_operator(edges, weight, num_vertices), x)
     e = edges.to(x.device)
     wx = w[:, None] * x
     num = torch.zeros((num_vertices, x.shape[1]), dtype=x.dtype, device=x.device)
@@ -693,6 +704,39 @@ def pool_edges_to_vertices(x, edges, num_vertices: int, weight=None) -> torch.Te
         .index_add(0, e[:, 1], w)
     )
     return num / torch.where(den > 0, den, torch.ones_like(den))[:, None]
+
+
+#: the pooling matrices of :func:`pool_edges_to_vertices` per (edges, weight, vertex count)
+_POOL_CACHE: dict[tuple[int, int, int], torch.Tensor] = {}
+
+
+def _pooling_operator(edges: torch.Tensor, weight: torch.Tensor, num_vertices: int) -> torch.Tensor:
+    """The ``(V, E)`` sparse matrix of the weighted mean over the edges at each vertex.
+
+    Entries ``w_e / sum_{e' ni v} w_e'`` at ``(v, e)`` for both ends of each edge; built
+    once per pair of constant tensors and kept while both exist.
+    """
+    key = (id(edges), id(weight), num_vertices)
+    P = _POOL_CACHE.get(key)
+    if P is None:
+        e = edges.to(torch.int64)
+        if e.numel() and (int(e.min()) < 0 or int(e.max()) >= num_vertices):
+            raise ValueError(
+                f"edges must hold vertex indices in [0, {num_vertices}), got {e.min()}..{e.max()}"
+            )
+        den = torch.zeros(num_vertices, dtype=weight.dtype, device=weight.device)
+        den = den.index_add(0, e[:, 0], weight).index_add(0, e[:, 1], weight)
+        den = torch.where(den > 0, den, torch.ones_like(den))
+        rows = torch.cat([e[:, 0], e[:, 1]])
+        cols = torch.arange(e.shape[0], device=e.device).repeat(2)
+        vals = torch.cat([weight / den[e[:, 0]], weight / den[e[:, 1]]])
+        P = torch.sparse_coo_tensor(
+            torch.stack([rows, cols]), vals, (num_vertices, e.shape[0]), check_invariants=False
+        ).coalesce()
+        _POOL_CACHE[key] = P
+        weakref.finalize(edges, _POOL_CACHE.pop, key, None)
+        weakref.finalize(weight, _POOL_CACHE.pop, key, None)
+    return P
 
 
 def pool_edges_to_faces(x, face_edges, weight=None) -> torch.Tensor:
