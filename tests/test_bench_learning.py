@@ -489,6 +489,9 @@ README_RECIPES = {
     "DiffusionNet's": "",
     "stretched copies up to 1.25, averaged weights": ", 4 stretched copies, averaged last 10",
     "stretched copies up to 1.5, averaged weights": ", 4 stretched copies (up to 1.5), averaged last 10",
+    "stretched copies up to 1.25, averaged weights; this release's code": (
+        ", 4 stretched copies, coefficients, averaged last 10"
+    ),
 }
 #: the README's learning rows, (model, recipe: "copies" for either recipe with copies), and
 #: the :func:`label` of their runs
