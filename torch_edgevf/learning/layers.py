@@ -116,17 +116,27 @@ def _check_vector(m, n: int, name: str) -> torch.Tensor:
 _CSR_CACHE: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
 
 
+def _kept(cache: dict, key, tensors: tuple[torch.Tensor, ...], build):
+    """``cache[key]``, made by ``build()`` at the first call and dropped as soon as one of
+    ``tensors`` is freed (``key`` holds their ids, which Python reuses)."""
+    out = cache.get(key)
+    if out is None:
+        out = cache[key] = build()
+        for t in tensors:
+            weakref.finalize(t, cache.pop, key, None)
+    return out
+
+
 def _csr_pair(A: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """``(A, A^H)`` in CSR layout, converted once per operator (``A`` coalesced COO)."""
-    pair = _CSR_CACHE.get(id(A))
-    if pair is None:
+
+    def convert():
         with warnings.catch_warnings():  # "sparse CSR support is in beta"
             warnings.simplefilter("ignore", UserWarning)
             AH = A.t().conj() if A.is_complex() else A.t()
-            pair = (A.to_sparse_csr(), AH.coalesce().to_sparse_csr())
-        _CSR_CACHE[id(A)] = pair
-        weakref.finalize(A, _CSR_CACHE.pop, id(A), None)
-    return pair
+            return (A.to_sparse_csr(), AH.coalesce().to_sparse_csr())
+
+    return _kept(_CSR_CACHE, id(A), (A,), convert)
 
 
 #: ``G^H Phi`` per pair of constant operators (see :func:`adjoint_on_basis`)
@@ -149,14 +159,7 @@ def adjoint_on_basis(G: torch.Tensor, evecs: torch.Tensor) -> torch.Tensor:
     """
     if G.requires_grad or evecs.requires_grad:
         return _spmm(G, evecs, adjoint=True)
-    key = (id(G), id(evecs))
-    out = _BASIS_CACHE.get(key)
-    if out is None:
-        out = _spmm(G, evecs, adjoint=True)
-        _BASIS_CACHE[key] = out
-        weakref.finalize(G, _BASIS_CACHE.pop, key, None)
-        weakref.finalize(evecs, _BASIS_CACHE.pop, key, None)
-    return out
+    return _kept(_BASIS_CACHE, (id(G), id(evecs)), (G, evecs), lambda: _spmm(G, evecs, adjoint=True))
 
 
 class _ConstantSpmm(torch.autograd.Function):
@@ -687,23 +690,20 @@ def pool_edges_to_vertices(x, edges, num_vertices: int, weight=None) -> torch.Te
     if not isinstance(edges, torch.Tensor) or edges.shape != (x.shape[0], 2):
         raise ValueError(f"edges must have shape ({x.shape[0]}, 2)")
     w = _check_weight(weight, x.shape[0], x.real if x.is_complex() else x)
-    if (
-        isinstance(weight, torch.Tensor)
-        and w is weight
-        and not (weight.requires_grad or x.is_complex())
-        and edges.device == x.device == weight.device
-    ):
+    if w is weight and not (weight.requires_grad or x.is_complex()) and edges.device == x.device == w.device:
         return _spmm(_pooling_operator(edges, weight, num_vertices), x)
     e = edges.to(x.device)
     wx = w[:, None] * x
     num = torch.zeros((num_vertices, x.shape[1]), dtype=x.dtype, device=x.device)
     num = num.index_add(0, e[:, 0], wx).index_add(0, e[:, 1], wx)
-    den = (
-        torch.zeros(num_vertices, dtype=w.dtype, device=x.device)
-        .index_add(0, e[:, 0], w)
-        .index_add(0, e[:, 1], w)
-    )
-    return num / torch.where(den > 0, den, torch.ones_like(den))[:, None]
+    return num / _weight_at_vertices(e, w, num_vertices)[:, None]
+
+
+def _weight_at_vertices(e: torch.Tensor, w: torch.Tensor, num_vertices: int) -> torch.Tensor:
+    """The sum of ``w`` over the edges at each vertex, 1 at a vertex on no edge (a divisor)."""
+    den = torch.zeros(num_vertices, dtype=w.dtype, device=e.device)
+    den = den.index_add(0, e[:, 0], w).index_add(0, e[:, 1], w)
+    return torch.where(den > 0, den, torch.ones_like(den))
 
 
 #: the pooling matrices of :func:`pool_edges_to_vertices` per (edges, weight, vertex count)
@@ -716,27 +716,22 @@ def _pooling_operator(edges: torch.Tensor, weight: torch.Tensor, num_vertices: i
     Entries ``w_e / sum_{e' ni v} w_e'`` at ``(v, e)`` for both ends of each edge; built
     once per pair of constant tensors and kept while both exist.
     """
-    key = (id(edges), id(weight), num_vertices)
-    P = _POOL_CACHE.get(key)
-    if P is None:
+
+    def build():
         e = edges.to(torch.int64)
         if e.numel() and (int(e.min()) < 0 or int(e.max()) >= num_vertices):
             raise ValueError(
                 f"edges must hold vertex indices in [0, {num_vertices}), got {e.min()}..{e.max()}"
             )
-        den = torch.zeros(num_vertices, dtype=weight.dtype, device=weight.device)
-        den = den.index_add(0, e[:, 0], weight).index_add(0, e[:, 1], weight)
-        den = torch.where(den > 0, den, torch.ones_like(den))
+        den = _weight_at_vertices(e, weight, num_vertices)
         rows = torch.cat([e[:, 0], e[:, 1]])
         cols = torch.arange(e.shape[0], device=e.device).repeat(2)
         vals = torch.cat([weight / den[e[:, 0]], weight / den[e[:, 1]]])
-        P = torch.sparse_coo_tensor(
+        return torch.sparse_coo_tensor(
             torch.stack([rows, cols]), vals, (num_vertices, e.shape[0]), check_invariants=False
         ).coalesce()
-        _POOL_CACHE[key] = P
-        weakref.finalize(edges, _POOL_CACHE.pop, key, None)
-        weakref.finalize(weight, _POOL_CACHE.pop, key, None)
-    return P
+
+    return _kept(_POOL_CACHE, (id(edges), id(weight), num_vertices), (edges, weight), build)
 
 
 def pool_edges_to_faces(x, face_edges, weight=None) -> torch.Tensor:

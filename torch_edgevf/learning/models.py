@@ -195,11 +195,15 @@ def _mesh_slices(offsets) -> list[slice]:
     return [slice(a, b) for a, b in zip(o[:-1], o[1:])]
 
 
+def _per_mesh(rows: torch.Tensor, c: torch.Tensor, meshes: list[slice]) -> torch.Tensor:
+    """``rows[s_b] @ c[b]`` for each mesh ``b`` of a batch (rows ``s_b``), stacked row-wise."""
+    parts = [rows[s].to(c.dtype) @ c[b] for b, s in enumerate(meshes)]
+    return parts[0] if len(parts) == 1 else torch.cat(parts, dim=0)
+
+
 def _synthesize(c: torch.Tensor, batch) -> torch.Tensor:
     """Edge fields ``Phi c`` from coefficients ``(B, k, C)`` in each mesh's edge eigenbasis."""
-    phi = batch.edge_evecs
-    parts = [phi[s].to(c.dtype) @ c[b] for b, s in enumerate(_mesh_slices(batch.edge_offsets))]
-    return parts[0] if len(parts) == 1 else torch.cat(parts, dim=0)
+    return _per_mesh(batch.edge_evecs, c, _mesh_slices(batch.edge_offsets))
 
 
 def _project(z: torch.Tensor, batch) -> torch.Tensor:
@@ -414,8 +418,7 @@ class EdgeFieldBlock(nn.Module):
         t = self.field_diffusion.times.to(new.real.dtype)
         new = new * torch.exp(-batch.edge_evals.to(t.dtype)[:, :, None] * t)
         u = _synthesize(new, batch)
-        parts = [basis[s] @ new[b] for b, s in enumerate(meshes)]
-        dc = -(parts[0] if len(parts) == 1 else torch.cat(parts, dim=0))
+        dc = -_per_mesh(basis, new, meshes)
         dc = dc * batch.vertex_mass.to(dc.real.dtype).reciprocal()[:, None]
         vec = [_vertex_invariants(u, self.products, batch, "edge"), torch.tanh(dc.real), torch.tanh(dc.imag)]
         feats += self._dropped(vec)
@@ -512,7 +515,7 @@ class EdgeFieldNet(nn.Module):
             raise ValueError(f"readout_fields must be True or False, got {readout_fields!r}")
         if readout_fields and vector == "none":
             raise ValueError("readout_fields needs a vector stream; vector='none' has none")
-        self.stream_dropout, self.high_pass = stream_dropout, high_pass
+        self.stream_dropout = stream_dropout
         self.in_channels, self.head, self.vector = in_channels, head, vector
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
@@ -553,7 +556,7 @@ class EdgeFieldNet(nn.Module):
         keep = None
         if self.training and self.stream_dropout > 0:
             keep = torch.rand(batch.num_meshes, device=x.device) >= self.stream_dropout
-        if self.vector == "edge" and not self.high_pass:
+        if all(block.spectral for block in self.blocks):
             # the fields as coefficients in the edge eigenbasis (EdgeFieldBlock.forward_spectral)
             c = None
             for block in self.blocks:
