@@ -150,6 +150,7 @@ def _degenerate_problem():
     return torch.cat([torch.cat([A, Z], 1), torch.cat([Z, A], 1)]).to_sparse(), p.m.repeat(2)
 
 
+@pytest.mark.filterwarnings("ignore:Anomaly Detection has been enabled")
 def test_degenerate_projector_loss_is_supported():
     A, m = _degenerate_problem()
     values = A.coalesce().values().clone().requires_grad_()
