@@ -593,16 +593,19 @@ def table(results: list[dict], models_run=None) -> str:
 def paired_table(results: list[dict], reference: str, folds: int | None = None) -> str:
     """Markdown: every row against ``reference`` (a :func:`label`) on the folds both ran.
 
-    The folds are paired by seed and fold. Per row: how many folds it shares with the
-    reference, the mean over them of the reference's test accuracy minus the row's, in
-    points, on how many the reference is ahead, level and behind, and the two-sided p-value
-    of the corrected resampled t test (Nadeau and Bengio 2003; for repeated K-fold
-    cross-validation, Bouckaert and Frank 2004): the variance of the mean difference over
-    ``n`` folds is taken as ``(1/n + n_test/n_train) s^2``, with ``n_test/n_train = 1/(K-1)``,
-    because the training sets of the folds overlap, and the naive ``s^2/n`` would make
-    small differences look significant. ``folds`` is ``K``; by default one more than the
-    largest fold index of the reference's runs. Rows that share fewer than two folds with
-    the reference are left out.
+    Runs are paired by seed and fold. Every seed splits the meshes into the same folds
+    (:func:`splits`; the seed changes the training only), so the runs of one fold share
+    their test meshes and are not separate samples: the test is over the folds, each
+    fold's difference the mean over the seeds that both ran on it. Per row: how many folds
+    (and runs) it shares with the reference, the mean over those folds of the reference's
+    test accuracy minus the row's, in points, on how many runs the reference is ahead,
+    level and behind, and the two-sided p-value of the corrected resampled t test (Nadeau
+    and Bengio 2003): the variance of the mean difference over ``n`` folds is taken as
+    ``(1/n + n_test/n_train) s^2``, with ``n_test/n_train = 1/(K-1)``, because the
+    training sets of the folds overlap, and the naive ``s^2/n`` would make small
+    differences look significant. ``folds`` is ``K``; by default one more than the largest
+    fold index of the reference's runs. Rows that share fewer than two folds with the
+    reference are left out.
     """
     from scipy import stats  # only the table needs it
 
@@ -620,23 +623,25 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
     lines = [
         f"Against {reference}, fold by fold (the reference's accuracy minus the model's):",
         "",
-        "| model | folds paired | mean difference (points) | reference ahead / level / behind "
-        "| p (corrected t) |",
+        "| model | folds (runs) paired | mean difference (points) | runs: reference ahead / level / behind "
+        "| p (corrected t over the folds) |",
         "|---|---:|---:|---|---:|",
     ]
     for name, other in by_fold.items():
         shared = sorted(set(ref) & set(other))
-        if name == reference or len(shared) < 2:
+        folds = sorted({split for _, split in shared})
+        if name == reference or len(folds) < 2:
             continue
-        d = np.array([ref[key] - other[key] for key in shared])
+        runs = np.array([ref[key] - other[key] for key in shared])
+        d = np.array([np.mean([ref[key] - other[key] for key in shared if key[1] == f]) for f in folds])
         n, mean, var = len(d), float(d.mean()), float(d.var(ddof=1))
         if var > 0:
             t = mean / np.sqrt((1 / n + 1 / (k - 1)) * var)
             p = float(2 * stats.t.sf(abs(t), n - 1))
         else:  # every fold the same difference
             p = 1.0 if mean == 0 else 0.0
-        counts = f"{int((d > 0).sum())} / {int((d == 0).sum())} / {int((d < 0).sum())}"
-        lines.append(f"| {name} | {n} | {100 * mean:+.2f} | {counts} | {p:.3f} |")
+        counts = f"{int((runs > 0).sum())} / {int((runs == 0).sum())} / {int((runs < 0).sum())}"
+        lines.append(f"| {name} | {n} ({len(runs)}) | {100 * mean:+.2f} | {counts} | {p:.3f} |")
     return "\n".join(lines)
 
 
