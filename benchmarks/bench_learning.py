@@ -267,15 +267,18 @@ def validation_flags(dataset: dict, per_class: int = 4) -> np.ndarray:
     return flags
 
 
-def splits(dataset: dict, folds: int, split_file, validation: bool = False):
+def splits(dataset: dict, folds: int, split_file, validation: bool = False, partition: int = 0):
     """``(name, train mask, test mask)`` per evaluation.
 
     The fixed split, a user split (a ``.npy`` of one flag per mesh: 0 train, 1 test, -1
-    left out), the validation split of :func:`validation_flags`, or stratified folds.
+    left out), the validation split of :func:`validation_flags`, or stratified folds: the
+    meshes of each class dealt to the ``folds`` folds in an order drawn from ``partition``
+    (the same folds for every training seed; another ``partition`` for repeated
+    cross-validation).
     """
     n = len(dataset["labels"])
     if folds:
-        rng = np.random.default_rng(0)
+        rng = np.random.default_rng(partition)
         fold = np.zeros(n, dtype=np.int64)
         for c in np.unique(dataset["labels"]):
             idx = rng.permutation(np.flatnonzero(dataset["labels"] == c))
@@ -593,11 +596,12 @@ def table(results: list[dict], models_run=None) -> str:
 def paired_table(results: list[dict], reference: str, folds: int | None = None) -> str:
     """Markdown: every row against ``reference`` (a :func:`label`) on the folds both ran.
 
-    Runs are paired by seed and fold. Every seed splits the meshes into the same folds
-    (:func:`splits`; the seed changes the training only), so the runs of one fold share
-    their test meshes and are not separate samples: the test is over the folds, each
-    fold's difference the mean over the seeds that both ran on it. Per row: how many folds
-    (and runs) it shares with the reference, the mean over those folds of the reference's
+    Runs are paired by partition, fold and seed. Every seed splits the meshes into the
+    same folds (:func:`splits`; the seed changes the training only), so the runs of one
+    fold share their test meshes and are not separate samples: the test is over the folds
+    (of every ``--partition`` run: repeated cross-validation, Bouckaert and Frank 2004),
+    each fold's difference the mean over the seeds that both ran on it. Per row: how many
+    folds (and runs) it shares with the reference, the mean over those folds of the reference's
     test accuracy minus the row's, in points, on how many runs the reference is ahead,
     level and behind, and the two-sided p-value of the corrected resampled t test (Nadeau
     and Bengio 2003): the variance of the mean difference over ``n`` folds is taken as
@@ -609,15 +613,16 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
     """
     from scipy import stats  # only the table needs it
 
-    by_fold: dict[str, dict[tuple[int, str], float]] = {}  # row: (seed, fold): accuracy
+    # row: (partition, fold, seed): accuracy
+    by_fold: dict[str, dict[tuple[int, str, int], float]] = {}
     for r in results:
         accuracies = by_fold.setdefault(label(r), {})
         if r["split"].startswith("fold"):
-            accuracies[(r["seed"], r["split"])] = r["test_accuracy"]
+            accuracies[(r.get("partition", 0), r["split"], r["seed"])] = r["test_accuracy"]
     ref = by_fold.get(reference)
     if not ref:
         raise ValueError(f"no cross-validation runs of {reference!r} to pair with")
-    k = folds if folds is not None else 1 + max(int(split[4:]) for _, split in ref)
+    k = folds if folds is not None else 1 + max(int(split[4:]) for _, split, _ in ref)
     if k < 2:
         raise ValueError(f"the corrected t test needs at least 2 folds, got {k}")
     lines = [
@@ -629,11 +634,11 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
     ]
     for name, other in by_fold.items():
         shared = sorted(set(ref) & set(other))
-        folds = sorted({split for _, split in shared})
-        if name == reference or len(folds) < 2:
+        groups = sorted({key[:2] for key in shared})  # (partition, fold)
+        if name == reference or len(groups) < 2:
             continue
         runs = np.array([ref[key] - other[key] for key in shared])
-        d = np.array([np.mean([ref[key] - other[key] for key in shared if key[1] == f]) for f in folds])
+        d = np.array([np.mean([ref[key] - other[key] for key in shared if key[:2] == g]) for g in groups])
         n, mean, var = len(d), float(d.mean()), float(d.var(ddof=1))
         if var > 0:
             t = mean / np.sqrt((1 / n + 1 / (k - 1)) * var)
@@ -654,6 +659,14 @@ def main(argv=None) -> list[dict]:
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--epochs", type=int, default=60)
     p.add_argument("--folds", type=int, default=0, help="stratified K-fold cross-validation over all meshes")
+    p.add_argument(
+        "--partition",
+        type=int,
+        default=0,
+        metavar="N",
+        help="with --folds: the seed of the meshes' assignment to folds (0: the saved runs' folds); "
+        "repeated cross-validation runs the folds of several partitions",
+    )
     p.add_argument(
         "--only-folds",
         default=None,
@@ -804,6 +817,10 @@ def main(argv=None) -> list[dict]:
             p.error(f"--only-folds takes comma-separated fold numbers, got {a.only_folds!r}")
         if not a.folds or not only_folds <= set(range(a.folds)):
             p.error(f"--only-folds needs --folds K and numbers in 0..K-1, got {a.only_folds!r}")
+    if a.partition and not a.folds:
+        p.error("--partition needs --folds K")
+    if a.partition < 0:
+        p.error("--partition must be a seed, 0 or more")
     try:
         a.data = str(psb_path(a.data))
     except ValueError as e:
@@ -850,7 +867,7 @@ def main(argv=None) -> list[dict]:
         done = "all from the cache"
     print(f"operators: {len(batches)} meshes, {done}", flush=True)
     results = []
-    evaluations = splits(dataset, a.folds, a.split, a.validation)
+    evaluations = splits(dataset, a.folds, a.split, a.validation, a.partition)
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
@@ -892,6 +909,8 @@ def main(argv=None) -> list[dict]:
                     r["schedule"] = a.schedule
                 if a.tag:
                     r["tag"] = a.tag
+                if a.partition:
+                    r["partition"] = a.partition
                 print(json.dumps(r), flush=True)
                 results.append(r)
                 if a.json:

@@ -48,6 +48,13 @@ def test_folds_are_stratified_and_cover_every_mesh_once(bench):
     for m in masks:
         assert (np.bincount(labels[m], minlength=5) == 4).all()
     assert len(bench.splits(dataset, 0, None)) == 1
+    # another partition: other folds, as stratified; partition 0 is the default
+    again = bench.splits(dataset, 5, None, partition=0)
+    assert all((a[2] == b[2]).all() for a, b in zip(evaluations, again))
+    other = [test for _, _, test in bench.splits(dataset, 5, None, partition=1)]
+    assert (np.sum(other, axis=0) == 1).all()
+    assert all((np.bincount(labels[m], minlength=5) == 4).all() for m in other)
+    assert any((m != o).any() for m, o in zip(masks, other))
 
 
 def test_split_file_is_checked(bench, tmp_path):
@@ -95,6 +102,8 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--weight-decay", "nan"], "--weight-decay must be 0"),
         (["--weight-decay", "inf"], "--weight-decay must be 0"),
         (["--validation", "--folds", "5"], "exclude each other"),
+        (["--partition", "1"], "--partition needs --folds K"),
+        (["--folds", "5", "--partition", "-1"], "--partition must be a seed"),
         (["--paired", "m"], "--paired compares saved runs"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
@@ -155,8 +164,10 @@ def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, 
 @pytest.mark.slow
 def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
     argv = ["--quick", "--models", "edgefieldnet-scalar", "--folds", "4", "--only-folds", "3,1"]
+    argv += ["--partition", "2"]
     results = bench.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
     assert [r["split"] for r in results] == ["fold1", "fold3"]
+    assert [r["partition"] for r in results] == [2, 2]  # recorded, so --paired keeps it apart
 
 
 def test_table_keeps_fixed_folds_and_validation_apart(bench):
@@ -206,6 +217,11 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
     split = [run("g", 0, k, 0.9 - (k + 1) / 100) for k in range(5)] + [run("g", 1, k, 0.9) for k in range(5)]
     halves = _paired_rows(bench.paired_table(ref + split, "ref"))["g"]
     assert halves == ["5 (10)", "+1.50", "5 / 5 / 0", "0.047"]
+    # another partition's folds are other samples (repeated cross-validation): b's
+    # differences on two partitions are 10 folds, t = 3.402 on 9 degrees of freedom
+    repeated = [dict(r, partition=1) for r in ref + better]
+    both = _paired_rows(bench.paired_table(ref + better + repeated, "ref"))["b"]
+    assert both == ["10 (10)", "+3.00", "10 / 0 / 0", "0.008"]
     # K from the argument: more folds, smaller correction, smaller p
     assert float(_paired_rows(bench.paired_table(ref + better, "ref", folds=10))["b"][-1]) < 0.047
     with pytest.raises(ValueError, match="no cross-validation runs of 'x'"):
