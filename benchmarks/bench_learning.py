@@ -637,8 +637,9 @@ def paired_table(results: list[dict], reference: str, folds: int | None = None) 
         groups = sorted({key[:2] for key in shared})  # (partition, fold)
         if name == reference or len(groups) < 2:
             continue
-        runs = np.array([ref[key] - other[key] for key in shared])
-        d = np.array([np.mean([ref[key] - other[key] for key in shared if key[:2] == g]) for g in groups])
+        diffs = {key: ref[key] - other[key] for key in shared}
+        runs = np.array(list(diffs.values()))
+        d = np.array([np.mean([v for key, v in diffs.items() if key[:2] == g]) for g in groups])
         n, mean, var = len(d), float(d.mean()), float(d.var(ddof=1))
         if var > 0:
             t = mean / np.sqrt((1 / n + 1 / (k - 1)) * var)
