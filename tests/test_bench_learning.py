@@ -182,6 +182,14 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
     assert cells[1:4] == ["0.500 ± 0.000 (n=1)", "0.500 ± 0.354 (n=2)", "1.000 ± 0.000 (n=1)"]
     assert "own split" not in bench.table(rows[:3], ["m"]).splitlines()[0]
+    # the folds of another partition are reported apart, after those of partition 0
+    rows += [dict(run("fold0", 1.0), partition=2), dict(run("fold1", 0.5), partition=2)]
+    cells = [c.strip() for c in bench.table(rows, ["m"]).splitlines()[2].strip("|").split("|")]
+    assert cells[2] == "0.500 ± 0.354 (n=2); partition 2: 0.750 ± 0.354 (n=2)"
+    only = [dict(run("fold0", 1.0), partition=1)]
+    assert (
+        bench.table(only, ["m"]).splitlines()[2].split("|")[3].strip() == "partition 1: 1.000 ± 0.000 (n=1)"
+    )
 
 
 def _paired_rows(markdown: str) -> dict[str, list[str]]:
@@ -562,7 +570,7 @@ README_ROWS = {
 def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     """Every cell of the README's learning table comes from the saved runs: the fixed split's
     mean and deviation over seeds 0-2 (and over seeds 0-5 where they were run), each seed's
-    mean and deviation over the 5 folds (every seed whose 5 folds were run), "not run"
+    mean and deviation over the 5 folds (every seed and ``--partition`` whose 5 folds were run), "not run"
     where there are none, and the parameters; the time per step from the saved
     ``--step-time`` measurement, as a ratio to the faithful DiffusionNet's."""
     root = BENCH.parents[1]
@@ -606,19 +614,21 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
             assert [s for s, _ in seeds] == list(range(6 if six else 3)), name
             assert first == mean_std([a for s, a in seeds if s < 3]), name
             assert six in ("", mean_std(fixed)), name
-        folds = {}  # seed: accuracies over the folds
+        folds = {}  # (partition, seed): accuracies over the folds
         for r in mine:
             if r["split"].startswith("fold"):
-                folds.setdefault(r["seed"], []).append(r["test_accuracy"])
-        complete = [
-            mean_std(xs) if seed == 0 else f"seed {seed}: {mean_std(xs)}"
-            for seed, xs in sorted(folds.items())
-            if len(xs) == 5
-        ]
+                folds.setdefault((r.get("partition", 0), r["seed"]), []).append(r["test_accuracy"])
+
+        def run_name(part: int, seed: int) -> str:
+            return (f"partition {part}, " if part else "") + (
+                f"seed {seed}: " if (part, seed) != (0, 0) else ""
+            )
+
+        complete = [run_name(*key) + mean_std(xs) for key, xs in sorted(folds.items()) if len(xs) == 5]
         if cross_cell == "not run":
             assert not folds, name
         elif cross_cell.endswith("(fold 0 only)"):
-            assert cross_cell == f"{folds[0][0]:.3f} (fold 0 only)" and len(folds[0]) == 1, name
+            assert cross_cell == f"{folds[0, 0][0]:.3f} (fold 0 only)" and len(folds[0, 0]) == 1, name
         else:
             assert [c.strip("*") for c in cross_cell.split("; ")] == complete, name
         assert {f"{r['parameters']:,}" for r in mine} == {parameters}, name
