@@ -791,11 +791,27 @@ def main(argv=None) -> list[dict]:
         help="with --table: also every row against ROW (a row's name) on the folds both ran, "
         "with the p-value of the corrected resampled t test (--folds: K, by default from the runs)",
     )
+    p.add_argument(
+        "--partitions",
+        default=None,
+        metavar="P,...",
+        help="with --table: keep the cross-validation runs of these partitions only (default: all)",
+    )
     a = p.parse_args(argv)
     if a.paired and not a.table:
         p.error("--paired compares saved runs: give them with --table")
+    if a.partitions is not None and not a.table:
+        p.error("--partitions selects saved runs: give them with --table")
     if a.table:
         results = [r for f in a.table for r in json.loads(Path(f).read_text())]
+        if a.partitions is not None:
+            try:
+                keep = {int(k) for k in a.partitions.split(",")}
+            except ValueError:
+                p.error(f"--partitions takes comma-separated numbers, got {a.partitions!r}")
+            results = [
+                r for r in results if not r["split"].startswith("fold") or r.get("partition", 0) in keep
+            ]
         print(table(with_averaged(results)))
         if a.paired:
             print()

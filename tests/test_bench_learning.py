@@ -105,12 +105,16 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--partition", "1"], "--partition needs --folds K"),
         (["--folds", "5", "--partition", "-1"], "--partition must be a seed"),
         (["--paired", "m"], "--paired compares saved runs"),
+        (["--partitions", "0"], "--partitions selects saved runs"),
+        (["--table", "{runs}", "--partitions", "a"], "--partitions takes comma-separated numbers"),
         ([], "TORCH_EDGEVF_PSB"),
     ],
 )
 def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
     monkeypatch.delenv("TORCH_EDGEVF_PSB", raising=False)
     data = [] if message == "TORCH_EDGEVF_PSB" else ["--data", str(tmp_path / "x.npz")]
+    (tmp_path / "runs.json").write_text("[]")
+    argv = [a.format(runs=tmp_path / "runs.json") for a in argv]
     with pytest.raises(SystemExit) as exc:
         bench.main(data + argv)
     assert exc.value.code == 2 and message in capsys.readouterr().err
@@ -190,6 +194,30 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     assert (
         bench.table(only, ["m"]).splitlines()[2].split("|")[3].strip() == "partition 1: 1.000 ± 0.000 (n=1)"
     )
+
+
+def test_table_partitions_keeps_the_folds_of_the_partitions_asked_for(bench, tmp_path, capsys):
+    """``--table RUNS --partitions 0`` leaves out the fold runs of other partitions (and
+    keeps every other split), so each partition's comparison can be printed alone."""
+
+    def run(split, acc, **extra):
+        return dict(
+            model="m",
+            seed=0,
+            split=split,
+            test_accuracy=acc,
+            train_seconds=1.0,
+            seconds_per_step=0.1,
+            parameters=7,
+            **extra,
+        )
+
+    runs = [run("fixed", 0.5), run("fold0", 0.75), run("fold0", 1.0, partition=1)]
+    (tmp_path / "runs.json").write_text(json.dumps(runs))
+    assert bench.main(["--table", str(tmp_path / "runs.json"), "--partitions", "0"]) == runs[:2]
+    assert "partition 1" not in capsys.readouterr().out
+    assert bench.main(["--table", str(tmp_path / "runs.json"), "--partitions", "1,0"]) == runs
+    assert "0.750 ± 0.000 (n=1); partition 1: 1.000 ± 0.000 (n=1)" in capsys.readouterr().out
 
 
 def _paired_rows(markdown: str) -> dict[str, list[str]]:
