@@ -283,31 +283,50 @@ _DROPOUT_ALIKE = "diffusionnet, 4 stretched copies, averaged last 10"
 _ABLATIONS = [
     f"edgefieldnet-{a}, 4 stretched copies, averaged last 10" for a in ("scalar", "vertexvec", "fixedtime")
 ]
-#: (reference, phrase, rows): the phrase with the rows' p-values against the reference
-#: (the earlier runs where it is empty), as the table prints them
+#: (reference, partitions, phrase, rows): the phrase with the rows' p-values against the
+#: reference (the earlier runs where it is empty) on the folds of those partitions (None:
+#: all), as the table prints them
 README_P_VALUES = [
-    (RERUN, "p = {} against the faithful DiffusionNet's own recipe", ["diffusionnet-nodropout"]),
-    (RERUN, "{} against it trained alike and {} against DiffusionNet with dropout", [_ALIKE, _DROPOUT_ALIKE]),
-    (RERUN, "the same tests give p = {}, {} and {}", _ABLATIONS),
-    ("", "(the earlier runs: {}, {} and {})", ["diffusionnet-nodropout", _ALIKE, _DROPOUT_ALIKE]),
-    ("", "vertex gradients p = {}", [_ABLATIONS[1]]),
-    ("", "times not learned p = {}", [_ABLATIONS[2]]),
-    ("", "vector stream p = {}", [_ABLATIONS[0]]),
+    (RERUN, (0,), "p = {} against the faithful DiffusionNet's own recipe", ["diffusionnet-nodropout"]),
+    (
+        RERUN,
+        (0,),
+        "{} against it trained alike and {} against DiffusionNet with dropout",
+        [_ALIKE, _DROPOUT_ALIKE],
+    ),
+    (RERUN, (0,), "the same tests give p = {}, {} and {}", _ABLATIONS),
+    ("", (0,), "(the earlier runs: {}, {} and {})", ["diffusionnet-nodropout", _ALIKE, _DROPOUT_ALIKE]),
+    ("", (0,), "vertex gradients p = {}", [_ABLATIONS[1]]),
+    ("", (0,), "times not learned p = {}", [_ABLATIONS[2]]),
+    ("", (0,), "vector stream p = {}", [_ABLATIONS[0]]),
 ]
 
 
 def test_readme_p_values_are_those_of_the_saved_runs(bench):
     """The p-values in the README's reading are those of ``--paired`` on the saved runs,
-    against this release's runs and against the earlier ones (``bench.RECOMMENDED``)."""
+    against this release's runs and against the earlier ones (``bench.RECOMMENDED``), on
+    partition 0's folds (``--partitions 0``) or on those of every partition."""
     root = BENCH.parents[1]
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
     readme = " ".join((root / "README.md").read_text().split())  # lines joined
+
+    def kept(partitions):
+        return [
+            r
+            for r in runs
+            if partitions is None or not r["split"].startswith("fold") or r.get("partition", 0) in partitions
+        ]
+
     tables = {
-        reference: _paired_rows(bench.paired_table(runs, reference or bench.RECOMMENDED))
-        for reference in {reference for reference, _, _ in README_P_VALUES}
+        (reference, partitions): _paired_rows(
+            bench.paired_table(kept(partitions), reference or bench.RECOMMENDED)
+        )
+        for reference, partitions in {
+            (reference, partitions) for reference, partitions, _, _ in README_P_VALUES
+        }
     }
-    for reference, phrase, rows in README_P_VALUES:
-        cells = tables[reference]
+    for reference, partitions, phrase, rows in README_P_VALUES:
+        cells = tables[reference, partitions]
         assert phrase.format(*(cells[row][-1] for row in rows)) in readme, phrase
 
 
