@@ -295,10 +295,12 @@ README_P_VALUES = [
         [_ALIKE, _DROPOUT_ALIKE],
     ),
     (RERUN, (0,), "the same tests give p = {}, {} and {}", _ABLATIONS),
-    ("", (0,), "(the earlier runs: {}, {} and {})", ["diffusionnet-nodropout", _ALIKE, _DROPOUT_ALIKE]),
+    ("", (0,), "(the earlier runs: {}, {} and {};", ["diffusionnet-nodropout", _ALIKE, _DROPOUT_ALIKE]),
     ("", (0,), "vertex gradients p = {}", [_ABLATIONS[1]]),
     ("", (0,), "times not learned p = {}", [_ABLATIONS[2]]),
     ("", (0,), "vector stream p = {}", [_ABLATIONS[0]]),
+    (RERUN, None, "p = {} against the first and {} against the second", ["diffusionnet-nodropout", _ALIKE]),
+    (RERUN, None, "with a second partition of the folds, p = {} over both", ["diffusionnet-nodropout"]),
 ]
 
 
