@@ -604,6 +604,11 @@ def table(results: list[dict], models_run=None) -> str:
     return "\n".join(lines)
 
 
+def in_partitions(results: list[dict], partitions) -> list[dict]:
+    """The runs, without the fold runs of partitions not in ``partitions`` (other splits kept)."""
+    return [r for r in results if not r["split"].startswith("fold") or r.get("partition", 0) in partitions]
+
+
 def paired_table(results: list[dict], reference: str, folds: int | None = None) -> str:
     """Markdown: every row against ``reference`` (a :func:`label`) on the folds both ran.
 
@@ -809,9 +814,7 @@ def main(argv=None) -> list[dict]:
                 keep = {int(k) for k in a.partitions.split(",")}
             except ValueError:
                 p.error(f"--partitions takes comma-separated numbers, got {a.partitions!r}")
-            results = [
-                r for r in results if not r["split"].startswith("fold") or r.get("partition", 0) in keep
-            ]
+            results = in_partitions(results, keep)
         print(table(with_averaged(results)))
         if a.paired:
             print()

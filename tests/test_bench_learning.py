@@ -312,16 +312,12 @@ def test_readme_p_values_are_those_of_the_saved_runs(bench):
     runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
     readme = " ".join((root / "README.md").read_text().split())  # lines joined
 
-    def kept(partitions):
-        return [
-            r
-            for r in runs
-            if partitions is None or not r["split"].startswith("fold") or r.get("partition", 0) in partitions
-        ]
-
     tables = {
         (reference, partitions): _paired_rows(
-            bench.paired_table(kept(partitions), reference or bench.RECOMMENDED)
+            bench.paired_table(
+                runs if partitions is None else bench.in_partitions(runs, partitions),
+                reference or bench.RECOMMENDED,
+            )
         )
         for reference, partitions in {
             (reference, partitions) for reference, partitions, _, _ in README_P_VALUES
