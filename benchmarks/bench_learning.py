@@ -589,7 +589,7 @@ def table(results: list[dict], models_run=None) -> str:
                 cv.setdefault(r.get("partition", 0), []).append(r["test_accuracy"])
         cv_cell = "; ".join(
             stat(xs) if part == 0 else f"partition {part}: {stat(xs)}"
-            for part, xs in sorted(cv.items(), key=lambda item: (item[0] != 0, item[0]))
+            for part, xs in sorted(cv.items())  # partitions are seeds, 0 or more: 0 first
         )
         rest = [r["test_accuracy"] for r in rs if own(r["split"])]
         ratio = (
