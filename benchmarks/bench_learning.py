@@ -22,8 +22,9 @@ reports that of its weights averaged over the last ``--average`` epochs (default
 epochs after the rate is halved).
 
 ``--augment K`` gives every model in the run the same K stretched copies of each training
-mesh (a random anisotropic stretch by factors up to 1.25, or ``--stretch S``, the copy
-re-centred and scaled to the unit sphere as the dataset's meshes are; operators cached);
+mesh (a random anisotropic stretch by factors up to 1.25, or ``--stretch S``, and with
+``--warp S`` a smooth random warp of strain at most S, the copy re-centred and scaled to
+the unit sphere as the dataset's meshes are; operators cached);
 each step takes the mesh or one of its copies, so a run takes as many steps as without
 them. ``--tta K`` also reports the accuracy of the class probabilities averaged over each
 test mesh and K stretched copies of it.
@@ -60,7 +61,7 @@ import numpy as np
 import torch
 
 from torch_edgevf.learning import models
-from torch_edgevf.learning.augment import random_stretch
+from torch_edgevf.learning.augment import random_stretch, random_warp
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.cache import OperatorCache
 from torch_edgevf.learning.datasets import psb_mesh, psb_path
@@ -214,11 +215,15 @@ def precompute(
     return batches, computed
 
 
-def stretched(v: np.ndarray, index: int, copy: int, spread: float = STRETCH) -> np.ndarray:
+def stretched(v: np.ndarray, index: int, copy: int, spread: float = STRETCH, warp: float = 0.0) -> np.ndarray:
     """Copy ``copy`` of mesh ``index``: :func:`random_stretch` by factors up to ``spread``,
-    centred and scaled to the unit bounding sphere again, as the dataset's meshes are. The
-    same arguments give the same copy (so its operators are cached once)."""
-    return random_stretch(v, np.random.default_rng([index, copy]), max_factor=spread)
+    then, with ``warp`` > 0, :func:`random_warp` of that strain, centred and scaled to the
+    unit bounding sphere again, as the dataset's meshes are. The same arguments give the
+    same copy (so its operators are cached once); the stretch of a warped copy is that of
+    the copy without the warp."""
+    rng = np.random.default_rng([index, copy])
+    w = random_stretch(v, rng, max_factor=spread)
+    return random_warp(w, rng, strain=warp) if warp else w
 
 
 def precompute_copies(
@@ -228,10 +233,11 @@ def precompute_copies(
     keep: np.ndarray,
     vertex_laplacian: str = "cotan",
     spread: float = STRETCH,
+    warp: float = 0.0,
 ) -> list[list[MeshBatch]]:
     """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`, by
-    factors up to ``spread``; none for meshes where ``keep`` is False), with their
-    operators cached like the meshes'.
+    factors up to ``spread``, warped with strain ``warp``; none for meshes where ``keep``
+    is False), with their operators cached like the meshes'.
 
     A copy whose operators cannot be computed (a stretch can turn a nearly degenerate face
     into one whose eigenpairs are lost to rounding: ``ValueError``) is left out, and
@@ -242,7 +248,8 @@ def precompute_copies(
     for i in np.flatnonzero(keep) if copies else []:
         v, f = dataset["meshes"][i]
         for c in range(copies):
-            one = {"meshes": [(stretched(v, int(i), c, spread), f)], "labels": dataset["labels"][i : i + 1]}
+            copy = stretched(v, int(i), c, spread, warp)
+            one = {"meshes": [(copy, f)], "labels": dataset["labels"][i : i + 1]}
             try:
                 out[i] += precompute(one, cache_dir, vertex_laplacian)[0]
             except ValueError as e:
@@ -520,6 +527,8 @@ def label(r: dict) -> str:
         name += f", {r['augment']} stretched copies"
         if r.get("stretch", STRETCH) != STRETCH:
             name += f" (up to {r['stretch']:g})"
+        if r.get("warp"):
+            name += f", warped (strain {r['warp']:g})"
     if r.get("weight_decay"):
         name += f", weight decay {r['weight_decay']:g}"
     if r.get("schedule", "step") != "step":
@@ -722,6 +731,14 @@ def main(argv=None) -> list[dict]:
         help=f"largest stretch factor of the copies of --augment and --tta (default {STRETCH})",
     )
     p.add_argument(
+        "--warp",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="also warp the copies of --augment and --tta smoothly, with strain at most S in [0, 1) "
+        "(default 0: stretched only)",
+    )
+    p.add_argument(
         "--tta",
         type=int,
         default=0,
@@ -828,6 +845,8 @@ def main(argv=None) -> list[dict]:
         p.error("--rounds must be at least 1")
     if a.augment < 0:
         p.error("--augment must be 0 (off) or a number of copies")
+    if not 0 <= a.warp < 1:
+        p.error("--warp must be in [0, 1)")
     if not a.stretch >= 1:
         p.error("--stretch must be at least 1")
     if a.tta < 0:
@@ -903,8 +922,8 @@ def main(argv=None) -> list[dict]:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
     tested = np.any([m for _, _, m in evaluations], axis=0)
-    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian, a.stretch)
-    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch)
+    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian, a.stretch, a.warp)
+    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch, a.warp)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]
@@ -932,6 +951,8 @@ def main(argv=None) -> list[dict]:
                     r["tta"] = a.tta
                 if (a.augment or a.tta) and a.stretch != STRETCH:
                     r["stretch"] = a.stretch
+                if (a.augment or a.tta) and a.warp:
+                    r["warp"] = a.warp
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
                 if a.weight_decay:
