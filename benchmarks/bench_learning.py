@@ -847,6 +847,8 @@ def main(argv=None) -> list[dict]:
         p.error("--augment must be 0 (off) or a number of copies")
     if not 0 <= a.warp < 1:
         p.error("--warp must be in [0, 1)")
+    if a.warp and not (a.augment or a.tta):
+        p.error("--warp warps the copies of --augment or --tta; give one of them")
     if not a.stretch >= 1:
         p.error("--stretch must be at least 1")
     if a.tta < 0:

@@ -98,6 +98,9 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--augment", "-1"], "--augment must be 0"),
         (["--tta", "-1"], "--tta must be 0"),
         (["--stretch", "0.8"], "--stretch must be at least 1"),
+        (["--augment", "4", "--warp", "1"], "--warp must be in [0, 1)"),
+        (["--augment", "4", "--warp", "nan"], "--warp must be in"),
+        (["--warp", "0.3"], "--warp warps the copies of --augment or --tta"),
         (["--weight-decay", "-0.1"], "--weight-decay must be 0"),
         (["--weight-decay", "nan"], "--weight-decay must be 0"),
         (["--weight-decay", "inf"], "--weight-decay must be 0"),
@@ -506,6 +509,26 @@ def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
     assert bench.label(run) == "edgefieldnet, 4 stretched copies"
     assert bench.label(dict(run, stretch=bench.STRETCH)) == "edgefieldnet, 4 stretched copies"
     assert bench.label(dict(run, stretch=1.5)) == "edgefieldnet, 4 stretched copies (up to 1.5)"
+
+
+def test_warped_copies_keep_their_stretch_and_runs_name_the_warp(bench, monkeypatch):
+    v = np.random.default_rng(3).standard_normal((60, 3))
+    dataset = {"meshes": [(v, None)], "labels": np.array([0])}
+    seen = []
+    monkeypatch.setattr(
+        bench, "precompute", lambda one, *a: (seen.append(one["meshes"][0][0]), ([None], []))[1]
+    )
+    bench.precompute_copies(dataset, None, 2, np.array([True]), warp=0.3)
+    stretched = [bench.stretched(v, 0, c) for c in range(2)]
+    for c in range(2):
+        np.testing.assert_array_equal(seen[c], bench.stretched(v, 0, c, warp=0.3))
+        # the warp moves the stretched copy (by at most its amplitude, before rescaling)
+        moved = np.linalg.norm(seen[c] - stretched[c], axis=1)
+        assert 1e-3 < moved.max() < 0.3
+    np.testing.assert_array_equal(bench.stretched(v, 0, 1, warp=0.0), stretched[1])
+    run = {"model": "edgefieldnet", "augment": 4}
+    assert bench.label(dict(run, warp=0.3)) == "edgefieldnet, 4 stretched copies, warped (strain 0.3)"
+    assert bench.label(dict(run, warp=0.0)) == "edgefieldnet, 4 stretched copies"
 
 
 def test_schedules_halve_or_decay_the_rate_along_a_cosine(bench):
