@@ -346,10 +346,18 @@ def train_step(model, opt, batch) -> None:
 
 
 @torch.no_grad()
-def accuracy(model, batches) -> float:
+def predictions(model, batches) -> list[int]:
+    """The class the model gives each batch (one mesh each)."""
     model.eval()
-    correct = sum(int(model(b).argmax(-1).item() == int(b.labels)) for b in batches)
+    out = [int(model(b).argmax(-1).item()) for b in batches]
     model.train()
+    return out
+
+
+def accuracy(model, batches, predicted: list[int] | None = None) -> float:
+    """The fraction of ``batches`` classified right (from ``predicted`` if given)."""
+    predicted = predictions(model, batches) if predicted is None else predicted
+    correct = sum(int(p == int(b.labels)) for p, b in zip(predicted, batches))
     return correct / max(len(batches), 1)
 
 
@@ -422,23 +430,29 @@ def train(
     of the weights averaged over the last ``average`` epochs of the same run (see :func:`fit`).
     Training accuracy is that on ``train_set`` (without the copies). With ``test_copies``
     (per test mesh, its stretched copies), also the accuracies of the probabilities
-    averaged over each test mesh and its copies (:func:`tta_accuracy`)."""
+    averaged over each test mesh and its copies (:func:`tta_accuracy`). ``test_predictions``
+    (and ``averaged_test_predictions``): the class given to each test mesh, in the order
+    of ``test_set``, for comparing models mesh by mesh."""
     model, averaged, seconds = fit(
         name, train_set, seed, epochs, num_classes, average, copies, weight_decay, schedule
     )
+    predicted = predictions(model, test_set)
     out = {
         "model": name,
         "seed": seed,
-        "test_accuracy": accuracy(model, test_set),
+        "test_accuracy": accuracy(model, test_set, predicted),
+        "test_predictions": predicted,
         "train_accuracy": accuracy(model, train_set),
         "train_seconds": seconds,
         "seconds_per_step": seconds / max(epochs * len(train_set), 1),
         "parameters": sum(p.numel() for p in model.parameters()),
     }
     if averaged is not None:
+        predicted = predictions(averaged.module, test_set)
         out.update(
             average_epochs=min(average, epochs),
-            averaged_test_accuracy=accuracy(averaged.module, test_set),
+            averaged_test_accuracy=accuracy(averaged.module, test_set, predicted),
+            averaged_test_predictions=predicted,
             averaged_train_accuracy=accuracy(averaged.module, train_set),
         )
     if test_copies is not None:
@@ -544,14 +558,15 @@ def with_averaged(results: list[dict]) -> list[dict]:
     for r in results:
         out.append(r)
         if "averaged_test_accuracy" in r:
-            out.append(
-                dict(
-                    r,
-                    averaged=True,
-                    test_accuracy=r["averaged_test_accuracy"],
-                    train_accuracy=r["averaged_train_accuracy"],
-                )
+            row = dict(
+                r,
+                averaged=True,
+                test_accuracy=r["averaged_test_accuracy"],
+                train_accuracy=r["averaged_train_accuracy"],
             )
+            if "averaged_test_predictions" in r:
+                row["test_predictions"] = r["averaged_test_predictions"]
+            out.append(row)
     return out
 
 
@@ -947,6 +962,7 @@ def main(argv=None) -> list[dict]:
                     a.schedule,
                 )
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
+                r["test_meshes"] = np.flatnonzero(test_mask).tolist()  # test_predictions' meshes
                 if a.augment:
                     r["augment"] = a.augment
                 if a.tta:

@@ -175,6 +175,9 @@ def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
     results = bench.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
     assert [r["split"] for r in results] == ["fold1", "fold3"]
     assert [r["partition"] for r in results] == [2, 2]  # recorded, so --paired keeps it apart
+    first, second = (set(r["test_meshes"]) for r in results)  # the meshes of test_predictions
+    assert first and second and not first & second
+    assert all(len(r["test_predictions"]) == len(r["test_meshes"]) for r in results)
 
 
 def test_table_keeps_fixed_folds_and_validation_apart(bench):
@@ -404,6 +407,23 @@ class _Logits(torch.nn.Module):
 
 def _logits(values, label):
     return SimpleNamespace(features=torch.tensor([values]), labels=torch.tensor(label))
+
+
+def test_runs_record_the_class_given_to_each_test_mesh(bench, monkeypatch):
+    model = _Logits()
+    meshes = [_logits([0.0, 0.2], 0), _logits([0.0, 0.1], 1), _logits([1.0, 0.0], 0)]
+    assert bench.predictions(model, meshes) == [1, 1, 0]
+    assert bench.accuracy(model, meshes, [0, 1, 0]) == 1.0  # from the predictions given
+    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
+    batches = _toy_batches()
+    r = bench.train("toy", batches[:9], batches[9:], 0, 4, 3, average=2)
+    assert len(r["test_predictions"]) == len(r["averaged_test_predictions"]) == 3
+    for key in ("test", "averaged_test"):
+        right = [p == int(b.labels) for p, b in zip(r[f"{key}_predictions"], batches[9:])]
+        assert r[f"{key}_accuracy"] == pytest.approx(sum(right) / 3)
+    plain, averaged = bench.with_averaged([r])
+    assert plain["test_predictions"] == r["test_predictions"]
+    assert averaged["test_predictions"] == r["averaged_test_predictions"]
 
 
 def test_test_time_augmentation_averages_the_probabilities_of_a_mesh_and_its_copies(bench):
