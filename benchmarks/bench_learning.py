@@ -132,7 +132,9 @@ MODELS = {
 #: the faithful DiffusionNet: as its public classification script builds it (no dropout)
 BASELINE = "diffusionnet-nodropout"
 DEFAULT_MODELS = ("edgefieldnet", BASELINE)
-OPERATOR_OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
+#: eigenpairs of ``L_c`` (the edge eigenbasis of the vector stream) unless ``--k-edge``
+K_EDGE = 32
+OPERATOR_OPTIONS = dict(k_edge=K_EDGE, k_vertex=128, vertex_gradient=True)
 VERTEX_LAPLACIANS = ("cotan", "robust")
 #: largest stretch factor of the augmented copies (see :func:`stretched`)
 STRETCH = 1.25
@@ -144,13 +146,14 @@ RECOMMENDED = f"edgefieldnet, 4 stretched copies, averaged last {AVERAGE_EPOCHS}
 SCHEDULES = ("step", "cosine")
 
 
-def operator_options(vertex_laplacian: str = "cotan") -> dict:
+def operator_options(vertex_laplacian: str = "cotan", k_edge: int = K_EDGE) -> dict:
     """The options of :func:`compute_operators` for the benchmark (cotan: the cache keys as before)."""
     if vertex_laplacian not in VERTEX_LAPLACIANS:
         raise ValueError(f"vertex_laplacian must be one of {VERTEX_LAPLACIANS}, got {vertex_laplacian!r}")
+    options = dict(OPERATOR_OPTIONS, k_edge=k_edge)
     if vertex_laplacian == "cotan":
-        return dict(OPERATOR_OPTIONS)
-    return dict(OPERATOR_OPTIONS, vertex_laplacian=vertex_laplacian)
+        return options
+    return dict(options, vertex_laplacian=vertex_laplacian)
 
 
 # --------------------------------------------------------------------------- data
@@ -190,15 +193,16 @@ def without_degenerate_faces(v, f):
 
 
 def precompute(
-    dataset: dict, cache_dir, vertex_laplacian: str = "cotan"
+    dataset: dict, cache_dir, vertex_laplacian: str = "cotan", k_edge: int = K_EDGE
 ) -> tuple[list[MeshBatch], list[float]]:
     """One single-mesh batch per mesh (operators cached), and the seconds of each mesh computed.
 
     ``vertex_laplacian``: the Laplacian of the vertex eigenbasis, of the heat kernel
     signatures and of the vertex diffusion (``"robust"``: DiffusionNet's intrinsic
-    Delaunay Laplacian, see :func:`compute_operators`).
+    Delaunay Laplacian, see :func:`compute_operators`); ``k_edge``: the eigenpairs of
+    ``L_c``.
     """
-    options = operator_options(vertex_laplacian)
+    options = operator_options(vertex_laplacian, k_edge)
     cache = OperatorCache(cache_dir)
     batches, computed = [], []
     for (v, f), label in zip(dataset["meshes"], dataset["labels"]):
@@ -234,6 +238,7 @@ def precompute_copies(
     vertex_laplacian: str = "cotan",
     spread: float = STRETCH,
     warp: float = 0.0,
+    k_edge: int = K_EDGE,
 ) -> list[list[MeshBatch]]:
     """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`, by
     factors up to ``spread``, warped with strain ``warp``; none for meshes where ``keep``
@@ -251,7 +256,7 @@ def precompute_copies(
             copy = stretched(v, int(i), c, spread, warp)
             one = {"meshes": [(copy, f)], "labels": dataset["labels"][i : i + 1]}
             try:
-                out[i] += precompute(one, cache_dir, vertex_laplacian)[0]
+                out[i] += precompute(one, cache_dir, vertex_laplacian, k_edge)[0]
             except ValueError as e:
                 dropped.append(f"mesh {int(i)} copy {c}: {str(e)[:80]}")
     if dropped:
@@ -493,14 +498,14 @@ def step_times(names, batches, num_classes: int, rounds: int = 3, passes: int = 
 
 
 def precompute_times(
-    dataset: dict, rounds: int = 3, vertex_laplacian: str = "cotan"
+    dataset: dict, rounds: int = 3, vertex_laplacian: str = "cotan", k_edge: int = K_EDGE
 ) -> dict[str, list[float]]:
     """Seconds per mesh of the operator precompute: DiffusionNet's against this library's.
 
     ``diffusionnet``: the steps of DiffusionNet's ``compute_operators`` (robust_laplacian's
     Laplacian, ARPACK ``eigsh`` with ``k = 128``, the least-squares vertex gradient), as
     ``bench_peers.py`` rebuilds them; ``edgefieldnet``: :func:`compute_operators` with the
-    options of this benchmark (``k = 128`` vertex and 32 edge eigenpairs, ``G``, ``L_c``,
+    options of this benchmark (``k = 128`` vertex and ``k_edge`` edge eigenpairs, ``G``, ``L_c``,
     the vertex gradient). Alternated ``rounds`` times over the meshes; nothing cached.
     """
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -514,7 +519,7 @@ def precompute_times(
         meshes.append((np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)))
     steps = {
         "diffusionnet": lambda v, f: bench_peers.diffusionnet_reference(v, f),
-        "edgefieldnet": lambda v, f: compute_operators(v, f, **operator_options(vertex_laplacian)),
+        "edgefieldnet": lambda v, f: compute_operators(v, f, **operator_options(vertex_laplacian, k_edge)),
     }
     out: dict[str, list[float]] = {n: [] for n in steps}
     for fn in steps.values():  # one untimed call each
@@ -532,11 +537,14 @@ def precompute_times(
 
 
 def label(r: dict) -> str:
-    """The row of a run: its model, the vertex Laplacian when it is not the cotangent one,
+    """The row of a run: its model, the vertex Laplacian when it is not the cotangent one
+    and the edge eigenpairs when not ``K_EDGE``,
     the augmentation, weight decay, schedule and ``--tag`` if any, and whether the
     accuracy is that of the averaged weights (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
+    if r.get("k_edge", K_EDGE) != K_EDGE:
+        name += f" ({r['k_edge']} edge eigenpairs)"
     if r.get("augment"):
         name += f", {r['augment']} stretched copies"
         if r.get("stretch", STRETCH) != STRETCH:
@@ -788,6 +796,13 @@ def main(argv=None) -> list[dict]:
         "(robust: DiffusionNet's intrinsic Delaunay Laplacian; needs robust_laplacian)",
     )
     p.add_argument(
+        "--k-edge",
+        type=int,
+        default=K_EDGE,
+        metavar="K",
+        help=f"eigenpairs of L_c, the basis of the vector stream's fields (default {K_EDGE})",
+    )
+    p.add_argument(
         "--cache",
         default=os.environ.get(
             "TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "operators")
@@ -860,6 +875,8 @@ def main(argv=None) -> list[dict]:
         p.error("--rounds must be at least 1")
     if a.augment < 0:
         p.error("--augment must be 0 (off) or a number of copies")
+    if a.k_edge < 1:
+        p.error("--k-edge must be at least 1")
     if not 0 <= a.warp < 1:
         p.error("--warp must be in [0, 1)")
     if a.warp and not (a.augment or a.tta):
@@ -907,13 +924,15 @@ def main(argv=None) -> list[dict]:
             "split": dataset["split"][keep],
         }
     if a.precompute_time:
-        times = precompute_times(dataset, rounds=a.rounds, vertex_laplacian=a.vertex_laplacian)
+        times = precompute_times(
+            dataset, rounds=a.rounds, vertex_laplacian=a.vertex_laplacian, k_edge=a.k_edge
+        )
         base = statistics.mean(times["diffusionnet"])
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.0f}" for t in ts)
             print(f"{name}: {ms} ms per mesh; mean vs diffusionnet {statistics.mean(ts) / base:.2f}")
         return [{"model": n, "seconds_per_mesh": ts} for n, ts in times.items()]
-    batches, computed = precompute(dataset, a.cache, a.vertex_laplacian)
+    batches, computed = precompute(dataset, a.cache, a.vertex_laplacian, a.k_edge)
     if a.step_time:
         times = step_times(names, batches, len(dataset["classes"]), rounds=a.rounds)
         against = _base(times)
@@ -939,8 +958,9 @@ def main(argv=None) -> list[dict]:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
     tested = np.any([m for _, _, m in evaluations], axis=0)
-    copies = precompute_copies(dataset, a.cache, a.augment, trained, a.vertex_laplacian, a.stretch, a.warp)
-    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, a.vertex_laplacian, a.stretch, a.warp)
+    options = (a.vertex_laplacian, a.stretch, a.warp, a.k_edge)
+    copies = precompute_copies(dataset, a.cache, a.augment, trained, *options)
+    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, *options)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]
@@ -973,6 +993,8 @@ def main(argv=None) -> list[dict]:
                     r["warp"] = a.warp
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian
+                if a.k_edge != K_EDGE:
+                    r["k_edge"] = a.k_edge
                 if a.weight_decay:
                     r["weight_decay"] = a.weight_decay
                 if a.schedule != "step":

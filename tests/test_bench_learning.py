@@ -101,6 +101,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         (["--augment", "4", "--warp", "1"], "--warp must be in [0, 1)"),
         (["--augment", "4", "--warp", "nan"], "--warp must be in"),
         (["--warp", "0.3"], "--warp warps the copies of --augment or --tta"),
+        (["--k-edge", "0"], "--k-edge must be at least 1"),
         (["--weight-decay", "-0.1"], "--weight-decay must be 0"),
         (["--weight-decay", "nan"], "--weight-decay must be 0"),
         (["--weight-decay", "inf"], "--weight-decay must be 0"),
@@ -500,7 +501,7 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
     v = np.random.default_rng(1).standard_normal((6, 3))
     dataset = {"meshes": [(v, None), (v + 1, None), (v, None)], "labels": np.array([0, 1, 2])}
 
-    def fake_precompute(one, cache_dir, vertex_laplacian="cotan"):
+    def fake_precompute(one, cache_dir, vertex_laplacian="cotan", k_edge=32):
         (w, _), label = one["meshes"][0], int(one["labels"][0])
         if label == 1 and np.allclose(w, bench.stretched(v + 1, 1, 0)):
             raise ValueError("eigsh: Lanczos did not converge")
@@ -549,6 +550,17 @@ def test_warped_copies_keep_their_stretch_and_runs_name_the_warp(bench, monkeypa
     run = {"model": "edgefieldnet", "augment": 4}
     assert bench.label(dict(run, warp=0.3)) == "edgefieldnet, 4 stretched copies, warped (strain 0.3)"
     assert bench.label(dict(run, warp=0.0)) == "edgefieldnet, 4 stretched copies"
+
+
+def test_edge_eigenpairs_reach_the_operators_and_the_run_label(bench):
+    assert bench.operator_options()["k_edge"] == bench.K_EDGE == 32
+    assert bench.operator_options("robust", 48) == dict(
+        bench.OPERATOR_OPTIONS, k_edge=48, vertex_laplacian="robust"
+    )
+    assert bench.operator_options() == bench.OPERATOR_OPTIONS  # the cache keys as before
+    run = {"model": "edgefieldnet", "augment": 4}
+    assert bench.label(dict(run, k_edge=48)) == "edgefieldnet (48 edge eigenpairs), 4 stretched copies"
+    assert bench.label(dict(run, k_edge=32)) == "edgefieldnet, 4 stretched copies"
 
 
 def test_schedules_halve_or_decay_the_rate_along_a_cosine(bench):
