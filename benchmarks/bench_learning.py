@@ -538,9 +538,9 @@ def precompute_times(
 
 def label(r: dict) -> str:
     """The row of a run: its model, the vertex Laplacian when it is not the cotangent one
-    and the edge eigenpairs when not ``K_EDGE``,
-    the augmentation, weight decay, schedule and ``--tag`` if any, and whether the
-    accuracy is that of the averaged weights (see :func:`with_averaged`)."""
+    and the edge eigenpairs when not ``K_EDGE``, the augmentation, the warp of the copies,
+    weight decay, schedule and ``--tag`` if any, and whether the accuracy is that of the
+    averaged weights (see :func:`with_averaged`)."""
     lap = r.get("vertex_laplacian", "cotan")
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
     if r.get("k_edge", K_EDGE) != K_EDGE:
@@ -549,8 +549,8 @@ def label(r: dict) -> str:
         name += f", {r['augment']} stretched copies"
         if r.get("stretch", STRETCH) != STRETCH:
             name += f" (up to {r['stretch']:g})"
-        if r.get("warp"):
-            name += f", warped (strain {r['warp']:g})"
+    if r.get("warp"):  # of the copies of --augment or --tta
+        name += f", warped (strain {r['warp']:g})"
     if r.get("weight_decay"):
         name += f", weight decay {r['weight_decay']:g}"
     if r.get("schedule", "step") != "step":

@@ -550,6 +550,9 @@ def test_warped_copies_keep_their_stretch_and_runs_name_the_warp(bench, monkeypa
     run = {"model": "edgefieldnet", "augment": 4}
     assert bench.label(dict(run, warp=0.3)) == "edgefieldnet, 4 stretched copies, warped (strain 0.3)"
     assert bench.label(dict(run, warp=0.0)) == "edgefieldnet, 4 stretched copies"
+    assert (
+        bench.label({"model": "edgefieldnet", "tta": 8, "warp": 0.3}) == "edgefieldnet, warped (strain 0.3)"
+    )
 
 
 def test_edge_eigenpairs_reach_the_operators_and_the_run_label(bench):
