@@ -7,7 +7,7 @@
 * :mod:`.cache`: an on-disk cache of them;
 * :mod:`.batching`: several meshes as one batch (a ``DataLoader``'s ``collate_fn``);
 * :mod:`.datasets`: the Princeton Segmentation Benchmark;
-* :mod:`.augment`: random stretches of meshes, for training;
+* :mod:`.augment`: random stretches and smooth warps of meshes, for training;
 * :mod:`.progress`: a progress bar for the precomputation.
 
 ``torch_edgevf.nn``, ``torch_edgevf.models``, ``torch_edgevf.losses`` and
