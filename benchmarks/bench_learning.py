@@ -958,9 +958,9 @@ def main(argv=None) -> list[dict]:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
     tested = np.any([m for _, _, m in evaluations], axis=0)
-    options = (a.vertex_laplacian, a.stretch, a.warp, a.k_edge)
-    copies = precompute_copies(dataset, a.cache, a.augment, trained, *options)
-    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, *options)
+    options = dict(vertex_laplacian=a.vertex_laplacian, spread=a.stretch, warp=a.warp, k_edge=a.k_edge)
+    copies = precompute_copies(dataset, a.cache, a.augment, trained, **options)
+    tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, **options)
     for split_name, train_mask, test_mask in evaluations:
         train_set = [b for b, t in zip(batches, train_mask) if t]
         train_copies = [c for c, t in zip(copies, train_mask) if t]
@@ -981,15 +981,16 @@ def main(argv=None) -> list[dict]:
                     a.weight_decay,
                     a.schedule,
                 )
+                # test_meshes: the meshes of test_predictions, indices in the file's order
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
-                r["test_meshes"] = np.flatnonzero(test_mask).tolist()  # test_predictions' meshes
+                r.update(test_meshes=np.flatnonzero(test_mask).tolist())
                 if a.augment:
                     r["augment"] = a.augment
                 if a.tta:
                     r["tta"] = a.tta
                 if (a.augment or a.tta) and a.stretch != STRETCH:
                     r["stretch"] = a.stretch
-                if (a.augment or a.tta) and a.warp:
+                if a.warp:  # only with --augment or --tta (checked above)
                     r["warp"] = a.warp
                 if a.vertex_laplacian != "cotan":
                     r["vertex_laplacian"] = a.vertex_laplacian

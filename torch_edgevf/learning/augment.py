@@ -3,8 +3,9 @@
 Networks on intrinsic inputs (heat kernel signatures) and rigid-motion invariant layers
 gain nothing from random rotations; a stretch changes the intrinsic geometry itself,
 as differently proportioned instances of a class do, and a warp changes it differently
-from place to place (one part of a shape thicker or longer than another). The copies' operators are computed
-like the meshes' (and cached: the same generator state gives the same copy).
+from place to place (one part of a shape thicker or longer than another). The copies'
+operators are computed like the meshes' (and cached: the same generator state gives the
+same copy).
 """
 
 from __future__ import annotations
