@@ -126,6 +126,14 @@ MODELS = {
     "edgefieldnet-vec8-nodropout": lambda c_in, c_out: models.EdgeFieldNet(
         c_in, c_out, log_features=True, vector_width=8, dropout=0.0
     ),
+    # the logits also take the first 32 eigenvalues of L_c (models.spectrum_features)
+    "edgefieldnet-spectrum": lambda c_in, c_out: models.EdgeFieldNet(
+        c_in, c_out, log_features=True, spectrum=K_EDGE
+    ),
+    # the faithful DiffusionNet given the same eigenvalues (the control of the one above)
+    "diffusionnet-nodropout-spectrum": lambda c_in, c_out: models.DiffusionNet(
+        c_in, c_out, dropout=0.0, spectrum=K_EDGE
+    ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
     "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }

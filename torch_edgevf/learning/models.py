@@ -63,6 +63,7 @@ __all__ = [
     "DiffusionNet",
     "DiffusionNetBaseline",
     "mini_mlp",
+    "spectrum_features",
 ]
 
 _HEADS = ("global", "vertex", "face")
@@ -168,6 +169,64 @@ def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | 
     if head == "vertex":
         return x
     return x[batch.faces].mean(1)
+
+
+#: added to the Weyl-normalised eigenvalues before their logarithm: a zero eigenvalue
+#: (a parallel field, as on a flat patch) gives ``log(0.01)``, not ``-inf``
+_SPECTRUM_EPS = 1e-2
+
+
+def _check_spectrum(spectrum, head: str) -> None:
+    if isinstance(spectrum, bool) or not isinstance(spectrum, int) or spectrum < 0:
+        raise ValueError(f"spectrum must be an int >= 0, got {spectrum!r}")
+    if spectrum and head != "global":
+        raise ValueError(f"spectrum needs head='global' (one output per mesh), got head={head!r}")
+
+
+def spectrum_features(batch, count: int) -> torch.Tensor:
+    """The first ``count`` eigenvalues of ``L_c`` of each mesh as scale-invariant features.
+
+    ``log(eps + A lambda_i / (2 pi (i + 1)))`` for ``i < count``, with ``A`` the mesh's
+    area and ``eps = 0.01``. Weyl's law for a line bundle on a surface,
+    ``lambda_i ~ 2 pi i / A``, makes these numbers of order one; how a mesh's spectrum
+    departs from the law is what they carry. The eigenvalues of ``L_c`` do not change
+    with rigid motions or a renumbering of the vertices, and ``A lambda_i`` not with the
+    scale. Unlike those of the Laplace-Beltrami operator they depend on how the surface
+    turns a tangent vector around (its holonomy), not only on its metric's scalar modes.
+
+    Parameters
+    ----------
+    batch : :class:`MeshBatch` with ``edge_evals`` ``(B, k)``, ``vertex_mass`` and
+        ``vertex_batch``
+    count : int, at most ``k``
+
+    Returns
+    -------
+    ``(B, count)`` tensor in the dtype of ``batch.vertex_mass``.
+    """
+    evals = batch.edge_evals
+    if count > evals.shape[1]:
+        raise ValueError(
+            f"spectrum={count} needs at least {count} eigenpairs of L_c, the batch has "
+            f"{evals.shape[1]} (compute_operators(..., k_edge={count}))"
+        )
+    mass = batch.vertex_mass
+    area = mass.new_zeros(batch.num_meshes).index_add_(0, batch.vertex_batch, mass)
+    weyl = 2 * torch.pi * torch.arange(1, count + 1, dtype=mass.dtype, device=mass.device)
+    return torch.log(_SPECTRUM_EPS + evals[:, :count].to(mass.dtype) * area[:, None] / weyl)
+
+
+def _spectrum_layer(count: int, out_channels: int) -> nn.Linear | None:
+    """The linear layer of the ``spectrum`` readout (created last in a model, so that a seed
+    initialises the rest of it as without one)."""
+    return nn.Linear(count, out_channels, bias=False) if count else None
+
+
+def _with_spectrum(model: nn.Module, logits: torch.Tensor, batch) -> torch.Tensor:
+    """``logits`` plus the model's linear map of :func:`spectrum_features`, if it has one."""
+    if model.spectrum is None:
+        return logits
+    return logits + model.spectrum(spectrum_features(batch, model.spectrum.in_features).to(logits.dtype))
 
 
 def _diffuse_vertices(diffusion: LearnedDiffusion, x, batch) -> torch.Tensor:
@@ -475,6 +534,10 @@ class EdgeFieldNet(nn.Module):
         ``A`` (``C_v`` channels), pooled from the edges to the vertices, beside the last
         scalars. The output layer then takes ``C + C_v`` channels per vertex (twice that
         with ``pool="mean_std"``).
+    spectrum : int
+        With ``head="global"``: the logits also take the first ``spectrum`` eigenvalues
+        of each mesh's ``L_c`` (:func:`spectrum_features`) through a linear layer
+        without bias. ``0`` (default): none.
 
     Forward
     -------
@@ -500,9 +563,11 @@ class EdgeFieldNet(nn.Module):
         head_dropout: float = 0.0,
         stream_dropout: float = 0.0,
         readout_fields: bool = False,
+        spectrum: int = 0,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_spectrum(spectrum, head)
         _check_dropout(
             dropout=dropout,
             vector_dropout=vector_dropout,
@@ -541,6 +606,7 @@ class EdgeFieldNet(nn.Module):
             if readout_fields
             else None
         )
+        self.spectrum = _spectrum_layer(spectrum, out_channels)
 
     def _field_readout(self, z, batch, products: torch.Tensor) -> torch.Tensor:
         """The invariant products of the fields ``z`` at the vertices (zero where there are none)."""
@@ -569,7 +635,8 @@ class EdgeFieldNet(nn.Module):
                 x, z = block(x, z, batch, keep)
         if self.field_products is not None:
             x = torch.cat([x, self._field_readout(z, batch, self.field_products)], dim=1)
-        return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
+        logits = _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
+        return _with_spectrum(self, logits, batch)
 
 
 # --------------------------------------------------------------------------- DiffusionNet
@@ -600,7 +667,8 @@ class DiffusionNet(nn.Module):
     features, and dropout 0.5 in the MLPs, its class's default; its classification
     script turns the dropout off (``dropout=0.0``). ``pool``, ``log_features`` and
     ``head_dropout`` are those of :class:`EdgeFieldNet`, for comparisons with the same
-    readout and inputs.
+    readout and inputs, and so is ``spectrum`` (the eigenvalues of ``L_c``, then also
+    needed in the batch), to give DiffusionNet the same global features.
     """
 
     def __init__(
@@ -615,9 +683,11 @@ class DiffusionNet(nn.Module):
         pool: str = "mean",
         log_features: bool = False,
         head_dropout: float = 0.0,
+        spectrum: int = 0,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_spectrum(spectrum, head)
         _check_dropout(dropout=dropout, head_dropout=head_dropout)
         self.in_channels, self.head = in_channels, head
         self.pool, self.log_features = pool, log_features
@@ -625,6 +695,7 @@ class DiffusionNet(nn.Module):
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
         self.last = _last_layer(width, out_channels, head, pool)
         self.head_dropout = Dropout(head_dropout) if head_dropout > 0 else None
+        self.spectrum = _spectrum_layer(spectrum, out_channels)
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
@@ -632,7 +703,8 @@ class DiffusionNet(nn.Module):
         x = self.first(_inputs(self, batch))
         for block in self.blocks:
             x = block(x, batch)
-        return _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
+        logits = _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
+        return _with_spectrum(self, logits, batch)
 
 
 #: the earlier name of :class:`DiffusionNet`
