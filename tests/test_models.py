@@ -526,3 +526,103 @@ def test_data_loader_workers_print_no_torch_warning(mesh):
     assert batches[0].gradient.layout == torch.sparse_coo and batches[0].gradient.is_coalesced()
     single = batching.collate_meshes(items[:2])
     torch.testing.assert_close(batches[0].gradient.to_dense(), single.gradient.to_dense())
+
+
+# --------------------------------------------------------------------------- spectrum readout
+
+
+@pytest.mark.parametrize("radius", [1.0, 3.7])
+def test_spectrum_features_of_the_sphere_are_the_analytic_ones(radius):
+    """On the round sphere of any radius the eigenvalues of ``L_c`` (n = 1) are
+    ``(l (l + 1) - 1) / r^2``, ``l >= 1``, of complex multiplicity ``2 l + 1``: the
+    features are ``log(0.01 + 2 (l (l + 1) - 1) / (i + 1))`` (the area is ``4 pi r^2``)."""
+    m = trimesh.creation.icosphere(subdivisions=3, radius=radius)
+    ops = precompute.compute_operators(np.asarray(m.vertices), np.asarray(m.faces), k_edge=15, k_vertex=4)
+    ones = torch.ones(len(m.vertices), 1, dtype=torch.float64)
+    got = models.spectrum_features(batching.collate_meshes([batching.MeshSample(ops, ones, 0)]), 15)
+    mu = np.repeat([1.0, 5.0, 11.0], [3, 5, 7])
+    expected = np.log(0.01 + 2 * mu / np.arange(1, 16))
+    assert got.shape == (1, 15) and got.dtype == torch.float64
+    np.testing.assert_allclose(got[0].numpy(), expected, atol=0.01)
+
+
+def test_spectrum_features_are_per_mesh_and_differentiable(mesh):
+    """In a batch of two meshes each row is that mesh's own (the same as alone), and
+    the features have float64 gradients in the eigenvalues and the masses."""
+    v, f = mesh
+    v2, f2 = perturbed_icosphere(1, 0.1, seed=9)
+    alone = [models.spectrum_features(_batch(*m), 12) for m in ((v, f), (v2, f2))]
+    both = batching.collate_meshes([_sample(v, f), _sample(v2, f2)])
+    torch.testing.assert_close(models.spectrum_features(both, 12), torch.cat(alone))
+    evals = both.edge_evals.detach().clone().requires_grad_(True)
+    mass = both.vertex_mass.detach().clone().requires_grad_(True)
+
+    def features(e, m):
+        both.edge_evals, both.vertex_mass = e, m
+        return models.spectrum_features(both, 12)
+
+    assert torch.autograd.gradcheck(features, (evals, mass))
+
+
+def test_spectrum_features_need_the_eigenpairs(mesh):
+    with pytest.raises(ValueError, match="spectrum=17 needs at least 17 eigenpairs of L_c, the batch has 16"):
+        models.spectrum_features(_batch(*mesh), 17)
+
+
+SPECTRUM_NETWORKS = {
+    "edge": lambda: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), log_features=True, spectrum=12
+    ),
+    "diffusionnet": lambda: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,), spectrum=12),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SPECTRUM_NETWORKS))
+def test_spectrum_readout_is_invariant_and_reads_the_spectrum(mesh, name):
+    """With ``spectrum`` the rest of the network is initialised as without it; the
+    logits are invariant to rigid motions and renumbering, and move with the spectrum's
+    weights."""
+    v, f = mesh
+    torch.manual_seed(0)
+    net = SPECTRUM_NETWORKS[name]().double().eval()
+    torch.manual_seed(0)
+    plain = (models.EdgeFieldNet if name == "edge" else models.DiffusionNet)(
+        8,
+        5,
+        width=8,
+        **({"vector_width": 4, "log_features": True} if name == "edge" else {}),
+        num_blocks=2,
+        mlp=(8,),
+    ).double()
+    shared = {k: w for k, w in net.state_dict().items() if not k.startswith("spectrum.")}
+    assert shared.keys() == plain.state_dict().keys()
+    assert all(torch.equal(w, plain.state_dict()[k]) for k, w in shared.items())
+    perm = np.random.default_rng(1).permutation(v.shape[0])
+    inverse = np.argsort(perm)
+    v2, f2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm], inverse[f][:, [1, 2, 0]]
+    with torch.no_grad():
+        a, b = net(_batch(v, f)), net(_batch(v2, f2))
+        torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)
+        net.spectrum.weight.mul_(-3.0)
+        assert (net(_batch(v, f)) - a).abs().max() > 1e-3
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(spectrum=-1), "spectrum must be an int >= 0, got -1"),
+        (dict(spectrum=True), "spectrum must be an int >= 0, got True"),
+        (dict(spectrum=2.5), "spectrum must be an int >= 0, got 2.5"),
+        (dict(spectrum=8, head="vertex"), "spectrum needs head='global'"),
+    ],
+)
+def test_bad_spectrum_is_named(kwargs, match):
+    for cls in (models.EdgeFieldNet, models.DiffusionNet):
+        with pytest.raises(ValueError, match=match):
+            cls(8, 5, **kwargs)
+
+
+def test_spectrum_larger_than_the_eigenpairs_is_named_at_the_first_call(mesh):
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1, spectrum=32).double()
+    with pytest.raises(ValueError, match="k_edge=32"):
+        net(_batch(*mesh))
