@@ -157,6 +157,23 @@ def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(ben
     assert bench._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
 
 
+def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_spectrum_only(bench):
+    """``edgefieldnet-spectrum`` is the recommended network and
+    ``diffusionnet-nodropout-spectrum`` the faithful DiffusionNet, seed for seed, plus the
+    same linear map of the ``K_EDGE`` eigenvalues of ``L_c``."""
+    for name, base in (
+        ("edgefieldnet-spectrum", "edgefieldnet"),
+        (bench.BASELINE + "-spectrum", bench.BASELINE),
+    ):
+        torch.manual_seed(0)
+        net = bench.MODELS[name](16, 19)
+        torch.manual_seed(0)
+        ref = bench.MODELS[base](16, 19).state_dict()
+        assert (net.spectrum.in_features, net.spectrum.out_features) == (bench.K_EDGE, 19)
+        rest = {k: w for k, w in net.state_dict().items() if not k.startswith("spectrum.")}
+        assert rest.keys() == ref.keys() and all(torch.equal(w, ref[k]) for k, w in rest.items())
+
+
 @pytest.mark.slow
 def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, capsys):
     pytest.importorskip("robust_laplacian")
