@@ -134,6 +134,10 @@ MODELS = {
     "diffusionnet-nodropout-spectrum": lambda c_in, c_out: models.DiffusionNet(
         c_in, c_out, dropout=0.0, spectrum=K_EDGE
     ),
+    # its control: the first 32 eigenvalues of the vertex Laplacian in place of those of L_c
+    "diffusionnet-nodropout-lbspectrum": lambda c_in, c_out: models.DiffusionNet(
+        c_in, c_out, dropout=0.0, spectrum=K_EDGE, spectrum_of="laplacian"
+    ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
     "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }

@@ -160,16 +160,19 @@ def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(ben
 def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_spectrum_only(bench):
     """``edgefieldnet-spectrum`` is the recommended network and
     ``diffusionnet-nodropout-spectrum`` the faithful DiffusionNet, seed for seed, plus the
-    same linear map of the ``K_EDGE`` eigenvalues of ``L_c``."""
+    same linear map of the ``K_EDGE`` eigenvalues of ``L_c``; ``-lbspectrum`` takes those
+    of the vertex Laplacian."""
     for name, base in (
         ("edgefieldnet-spectrum", "edgefieldnet"),
         (bench.BASELINE + "-spectrum", bench.BASELINE),
+        (bench.BASELINE + "-lbspectrum", bench.BASELINE),
     ):
         torch.manual_seed(0)
         net = bench.MODELS[name](16, 19)
         torch.manual_seed(0)
         ref = bench.MODELS[base](16, 19).state_dict()
         assert (net.spectrum.in_features, net.spectrum.out_features) == (bench.K_EDGE, 19)
+        assert net.spectrum_of == ("laplacian" if "lbspectrum" in name else "connection")
         rest = {k: w for k, w in net.state_dict().items() if not k.startswith("spectrum.")}
         assert rest.keys() == ref.keys() and all(torch.equal(w, ref[k]) for k, w in rest.items())
 

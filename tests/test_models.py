@@ -535,15 +535,25 @@ def test_data_loader_workers_print_no_torch_warning(mesh):
 def test_spectrum_features_of_the_sphere_are_the_analytic_ones(radius):
     """On the round sphere of any radius the eigenvalues of ``L_c`` (n = 1) are
     ``(l (l + 1) - 1) / r^2``, ``l >= 1``, of complex multiplicity ``2 l + 1``: the
-    features are ``log(0.01 + 2 (l (l + 1) - 1) / (i + 1))`` (the area is ``4 pi r^2``)."""
+    features are ``log(0.01 + 2 (l (l + 1) - 1) / (i + 1))`` (the area is ``4 pi r^2``).
+    Those of the Laplacian are ``l (l + 1) / r^2`` of multiplicity ``2 l + 1``, ``l >= 0``:
+    past the constant mode the features are ``log(0.01 + l (l + 1) / i)``."""
     m = trimesh.creation.icosphere(subdivisions=3, radius=radius)
-    ops = precompute.compute_operators(np.asarray(m.vertices), np.asarray(m.faces), k_edge=15, k_vertex=4)
+    ops = precompute.compute_operators(np.asarray(m.vertices), np.asarray(m.faces), k_edge=15, k_vertex=16)
     ones = torch.ones(len(m.vertices), 1, dtype=torch.float64)
-    got = models.spectrum_features(batching.collate_meshes([batching.MeshSample(ops, ones, 0)]), 15)
+    batch = batching.collate_meshes([batching.MeshSample(ops, ones, 0)])
+    got = models.spectrum_features(batch, 15)
     mu = np.repeat([1.0, 5.0, 11.0], [3, 5, 7])
-    expected = np.log(0.01 + 2 * mu / np.arange(1, 16))
     assert got.shape == (1, 15) and got.dtype == torch.float64
-    np.testing.assert_allclose(got[0].numpy(), expected, atol=0.01)
+    np.testing.assert_allclose(got[0].numpy(), np.log(0.01 + 2 * mu / np.arange(1, 16)), atol=0.01)
+    got = models.spectrum_features(batch, 15, "laplacian")
+    ll = np.repeat([2.0, 6.0, 12.0], [3, 5, 7])
+    # the cotangent eigenvalues of this sphere are within 2% of the analytic ones
+    np.testing.assert_allclose(got[0].numpy(), np.log(0.01 + ll / np.arange(1, 16)), atol=0.025)
+    with pytest.raises(ValueError, match=r"at least 17 eigenpairs of the vertex Laplacian.*k_vertex=17"):
+        models.spectrum_features(batch, 16, "laplacian")
+    with pytest.raises(ValueError, match="operator must be one of"):
+        models.spectrum_features(batch, 4, "hodge")
 
 
 def test_spectrum_features_are_per_mesh_and_differentiable(mesh):
@@ -574,6 +584,9 @@ SPECTRUM_NETWORKS = {
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), log_features=True, spectrum=12
     ),
     "diffusionnet": lambda: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,), spectrum=12),
+    "diffusionnet-laplacian": lambda: models.DiffusionNet(
+        8, 5, width=8, num_blocks=2, mlp=(8,), spectrum=12, spectrum_of="laplacian"
+    ),
 }
 
 
@@ -614,6 +627,7 @@ def test_spectrum_readout_is_invariant_and_reads_the_spectrum(mesh, name):
         (dict(spectrum=True), "spectrum must be an int >= 0, got True"),
         (dict(spectrum=2.5), "spectrum must be an int >= 0, got 2.5"),
         (dict(spectrum=8, head="vertex"), "spectrum needs head='global'"),
+        (dict(spectrum=8, spectrum_of="hodge"), "spectrum_of must be one of"),
     ],
 )
 def test_bad_spectrum_is_named(kwargs, match):

@@ -64,6 +64,7 @@ __all__ = [
     "DiffusionNetBaseline",
     "mini_mlp",
     "spectrum_features",
+    "SPECTRUM_OPERATORS",
 ]
 
 _HEADS = ("global", "vertex", "face")
@@ -176,44 +177,67 @@ def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | 
 _SPECTRUM_EPS = 1e-2
 
 
-def _check_spectrum(spectrum, head: str) -> None:
+#: the operators whose eigenvalues :func:`spectrum_features` reads
+SPECTRUM_OPERATORS = ("connection", "laplacian")
+
+
+def _check_spectrum(spectrum, head: str, spectrum_of: str) -> None:
     if isinstance(spectrum, bool) or not isinstance(spectrum, int) or spectrum < 0:
         raise ValueError(f"spectrum must be an int >= 0, got {spectrum!r}")
     if spectrum and head != "global":
         raise ValueError(f"spectrum needs head='global' (one output per mesh), got head={head!r}")
+    if spectrum_of not in SPECTRUM_OPERATORS:
+        raise ValueError(f"spectrum_of must be one of {SPECTRUM_OPERATORS}, got {spectrum_of!r}")
 
 
-def spectrum_features(batch, count: int) -> torch.Tensor:
-    """The first ``count`` eigenvalues of ``L_c`` of each mesh as scale-invariant features.
+def spectrum_features(batch, count: int, operator: str = "connection") -> torch.Tensor:
+    """The first ``count`` eigenvalues of an operator of each mesh as scale-invariant features.
 
+    ``operator="connection"`` (default): those of ``L_c``,
     ``log(eps + A lambda_i / (2 pi (i + 1)))`` for ``i < count``, with ``A`` the mesh's
     area and ``eps = 0.01``. Weyl's law for a line bundle on a surface,
     ``lambda_i ~ 2 pi i / A``, makes these numbers of order one; how a mesh's spectrum
-    departs from the law is what they carry. The eigenvalues of ``L_c`` do not change
-    with rigid motions or a renumbering of the vertices, and ``A lambda_i`` not with the
-    scale. Unlike those of the Laplace-Beltrami operator they depend on how the surface
-    turns a tangent vector around (its holonomy), not only on its metric's scalar modes.
+    departs from the law is what they carry. ``operator="laplacian"``: those of the
+    vertex Laplacian after the first (the constant mode),
+    ``log(eps + A lambda_i / (4 pi i))`` for ``1 <= i <= count`` (Weyl's law for
+    functions, ``lambda_i ~ 4 pi i / A``). Eigenvalues do not change with rigid motions or
+    a renumbering of the vertices, and ``A lambda_i`` not with the scale. Those of ``L_c``
+    also depend on how the surface turns a tangent vector around (its holonomy), which
+    the Laplace-Beltrami eigenpairs, and the heat kernel signatures made from them, do
+    not see.
 
     Parameters
     ----------
-    batch : :class:`MeshBatch` with ``edge_evals`` ``(B, k)``, ``vertex_mass`` and
-        ``vertex_batch``
-    count : int, at most ``k``
+    batch : :class:`MeshBatch` with ``edge_evals`` ``(B, k)`` (or ``vertex_evals`` for
+        ``"laplacian"``), ``vertex_mass`` and ``vertex_batch``
+    count : int, at most ``k`` (``k - 1`` for ``"laplacian"``)
+    operator : {"connection", "laplacian"}
 
     Returns
     -------
     ``(B, count)`` tensor in the dtype of ``batch.vertex_mass``.
     """
-    evals = batch.edge_evals
-    if count > evals.shape[1]:
-        raise ValueError(
-            f"spectrum={count} needs at least {count} eigenpairs of L_c, the batch has "
-            f"{evals.shape[1]} (compute_operators(..., k_edge={count}))"
-        )
+    if operator not in SPECTRUM_OPERATORS:
+        raise ValueError(f"operator must be one of {SPECTRUM_OPERATORS}, got {operator!r}")
     mass = batch.vertex_mass
+    if operator == "connection":
+        evals, first, weyl, name, option = batch.edge_evals, 0, 2 * torch.pi, "L_c", "k_edge"
+    else:
+        evals, first, weyl, name, option = (
+            batch.vertex_evals,
+            1,
+            4 * torch.pi,
+            "the vertex Laplacian",
+            "k_vertex",
+        )
+    if first + count > evals.shape[1]:
+        raise ValueError(
+            f"spectrum={count} needs at least {first + count} eigenpairs of {name}, the batch has "
+            f"{evals.shape[1]} (compute_operators(..., {option}={first + count}))"
+        )
     area = mass.new_zeros(batch.num_meshes).index_add_(0, batch.vertex_batch, mass)
-    weyl = 2 * torch.pi * torch.arange(1, count + 1, dtype=mass.dtype, device=mass.device)
-    return torch.log(_SPECTRUM_EPS + evals[:, :count].to(mass.dtype) * area[:, None] / weyl)
+    law = weyl * torch.arange(1, count + 1, dtype=mass.dtype, device=mass.device)
+    return torch.log(_SPECTRUM_EPS + evals[:, first : first + count].to(mass.dtype) * area[:, None] / law)
 
 
 def _spectrum_layer(count: int, out_channels: int) -> nn.Linear | None:
@@ -226,7 +250,8 @@ def _with_spectrum(model: nn.Module, logits: torch.Tensor, batch) -> torch.Tenso
     """``logits`` plus the model's linear map of :func:`spectrum_features`, if it has one."""
     if model.spectrum is None:
         return logits
-    return logits + model.spectrum(spectrum_features(batch, model.spectrum.in_features).to(logits.dtype))
+    features = spectrum_features(batch, model.spectrum.in_features, model.spectrum_of)
+    return logits + model.spectrum(features.to(logits.dtype))
 
 
 def _diffuse_vertices(diffusion: LearnedDiffusion, x, batch) -> torch.Tensor:
@@ -538,6 +563,9 @@ class EdgeFieldNet(nn.Module):
         With ``head="global"``: the logits also take the first ``spectrum`` eigenvalues
         of each mesh's ``L_c`` (:func:`spectrum_features`) through a linear layer
         without bias. ``0`` (default): none.
+    spectrum_of : {"connection", "laplacian"}
+        Whose eigenvalues ``spectrum`` takes: ``L_c``'s (default) or the vertex
+        Laplacian's.
 
     Forward
     -------
@@ -564,10 +592,11 @@ class EdgeFieldNet(nn.Module):
         stream_dropout: float = 0.0,
         readout_fields: bool = False,
         spectrum: int = 0,
+        spectrum_of: str = "connection",
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
-        _check_spectrum(spectrum, head)
+        _check_spectrum(spectrum, head, spectrum_of)
         _check_dropout(
             dropout=dropout,
             vector_dropout=vector_dropout,
@@ -606,7 +635,7 @@ class EdgeFieldNet(nn.Module):
             if readout_fields
             else None
         )
-        self.spectrum = _spectrum_layer(spectrum, out_channels)
+        self.spectrum, self.spectrum_of = _spectrum_layer(spectrum, out_channels), spectrum_of
 
     def _field_readout(self, z, batch, products: torch.Tensor) -> torch.Tensor:
         """The invariant products of the fields ``z`` at the vertices (zero where there are none)."""
@@ -667,8 +696,9 @@ class DiffusionNet(nn.Module):
     features, and dropout 0.5 in the MLPs, its class's default; its classification
     script turns the dropout off (``dropout=0.0``). ``pool``, ``log_features`` and
     ``head_dropout`` are those of :class:`EdgeFieldNet`, for comparisons with the same
-    readout and inputs, and so is ``spectrum`` (the eigenvalues of ``L_c``, then also
-    needed in the batch), to give DiffusionNet the same global features.
+    readout and inputs, and so are ``spectrum`` and ``spectrum_of`` (with the default
+    ``"connection"``, the eigenvalues of ``L_c`` are then needed in the batch too), to
+    give DiffusionNet the same global features.
     """
 
     def __init__(
@@ -684,10 +714,11 @@ class DiffusionNet(nn.Module):
         log_features: bool = False,
         head_dropout: float = 0.0,
         spectrum: int = 0,
+        spectrum_of: str = "connection",
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
-        _check_spectrum(spectrum, head)
+        _check_spectrum(spectrum, head, spectrum_of)
         _check_dropout(dropout=dropout, head_dropout=head_dropout)
         self.in_channels, self.head = in_channels, head
         self.pool, self.log_features = pool, log_features
@@ -695,7 +726,7 @@ class DiffusionNet(nn.Module):
         self.blocks = nn.ModuleList(DiffusionNetBlock(width, mlp, dropout) for _ in range(num_blocks))
         self.last = _last_layer(width, out_channels, head, pool)
         self.head_dropout = Dropout(head_dropout) if head_dropout > 0 else None
-        self.spectrum = _spectrum_layer(spectrum, out_channels)
+        self.spectrum, self.spectrum_of = _spectrum_layer(spectrum, out_channels), spectrum_of
 
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
