@@ -246,12 +246,11 @@ def _spectrum_layer(count: int, out_channels: int) -> nn.Linear | None:
     return nn.Linear(count, out_channels, bias=False) if count else None
 
 
-def _with_spectrum(model: nn.Module, logits: torch.Tensor, batch) -> torch.Tensor:
-    """``logits`` plus the model's linear map of :func:`spectrum_features`, if it has one."""
-    if model.spectrum is None:
+def _with_spectrum(layer: nn.Linear | None, operator: str, logits: torch.Tensor, batch) -> torch.Tensor:
+    """``logits`` plus ``layer`` of the :func:`spectrum_features` of ``operator`` (if a layer)."""
+    if layer is None:
         return logits
-    features = spectrum_features(batch, model.spectrum.in_features, model.spectrum_of)
-    return logits + model.spectrum(features.to(logits.dtype))
+    return logits + layer(spectrum_features(batch, layer.in_features, operator).to(logits.dtype))
 
 
 def _diffuse_vertices(diffusion: LearnedDiffusion, x, batch) -> torch.Tensor:
@@ -665,7 +664,7 @@ class EdgeFieldNet(nn.Module):
         if self.field_products is not None:
             x = torch.cat([x, self._field_readout(z, batch, self.field_products)], dim=1)
         logits = _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
-        return _with_spectrum(self, logits, batch)
+        return _with_spectrum(self.spectrum, self.spectrum_of, logits, batch)
 
 
 # --------------------------------------------------------------------------- DiffusionNet
@@ -735,7 +734,7 @@ class DiffusionNet(nn.Module):
         for block in self.blocks:
             x = block(x, batch)
         logits = _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
-        return _with_spectrum(self, logits, batch)
+        return _with_spectrum(self.spectrum, self.spectrum_of, logits, batch)
 
 
 #: the earlier name of :class:`DiffusionNet`
