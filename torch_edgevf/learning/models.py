@@ -172,8 +172,8 @@ def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | 
     return x[batch.faces].mean(1)
 
 
-#: added to the Weyl-normalised eigenvalues before their logarithm: a zero eigenvalue
-#: (a parallel field, as on a flat patch) gives ``log(0.01)``, not ``-inf``
+#: added to the Weyl-normalised eigenvalues before their logarithm: a zero eigenvalue (a
+#: parallel field on a flat patch, a mesh's second component) gives ``log(0.01)``, not ``-inf``
 _SPECTRUM_EPS = 1e-2
 
 
@@ -560,8 +560,9 @@ class EdgeFieldNet(nn.Module):
         with ``pool="mean_std"``).
     spectrum : int
         With ``head="global"``: the logits also take the first ``spectrum`` eigenvalues
-        of each mesh's ``L_c`` (:func:`spectrum_features`) through a linear layer
-        without bias. ``0`` (default): none.
+        of each mesh's ``L_c``, or of the operator ``spectrum_of`` names
+        (:func:`spectrum_features`), through a linear layer without bias. ``0``
+        (default): none.
     spectrum_of : {"connection", "laplacian"}
         Whose eigenvalues ``spectrum`` takes: ``L_c``'s (default) or the vertex
         Laplacian's.
