@@ -328,7 +328,7 @@ README_P_VALUES = [
     ("", (0,), "vector stream p = {}", [_ABLATIONS[0]]),
     (RERUN, None, "p = {} against the first and {} against the second", ["diffusionnet-nodropout", _ALIKE]),
     (RERUN, None, "with a second partition of the folds, p = {} over both", ["diffusionnet-nodropout"]),
-    (RERUN, None, "(10 in all) the three losses are significant: p = {}, {} and {}", _ABLATIONS),
+    (RERUN, None, "run on it) the three losses are significant: p = {}, {} and {}", _ABLATIONS),
 ]
 
 
