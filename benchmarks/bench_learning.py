@@ -993,8 +993,8 @@ def main(argv=None) -> list[dict]:
                     a.weight_decay,
                     a.schedule,
                 )
-                # test_meshes: the meshes of test_predictions, indices in the file's order
                 r.update(split=split_name, epochs=a.epochs, threads=a.threads)
+                # the meshes of test_predictions, indices in the file's order
                 r.update(test_meshes=np.flatnonzero(test_mask).tolist())
                 if a.augment:
                     r["augment"] = a.augment

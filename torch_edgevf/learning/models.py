@@ -37,6 +37,8 @@ tasks whose input and output are tangent fields.
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 
@@ -177,8 +179,15 @@ def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | 
 _SPECTRUM_EPS = 1e-2
 
 
+#: per operator of :func:`spectrum_features`: the batch's eigenvalues, the index of the
+#: first one read, Weyl's constant (``lambda_i ~ c i / A``), its name and the option of
+#: :func:`compute_operators` that sets how many there are
+_SPECTRA = {
+    "connection": ("edge_evals", 0, 2 * math.pi, "L_c", "k_edge"),
+    "laplacian": ("vertex_evals", 1, 4 * math.pi, "the vertex Laplacian", "k_vertex"),
+}
 #: the operators whose eigenvalues :func:`spectrum_features` reads
-SPECTRUM_OPERATORS = ("connection", "laplacian")
+SPECTRUM_OPERATORS = tuple(_SPECTRA)
 
 
 def _check_spectrum(spectrum, head: str, spectrum_of: str) -> None:
@@ -219,17 +228,8 @@ def spectrum_features(batch, count: int, operator: str = "connection") -> torch.
     """
     if operator not in SPECTRUM_OPERATORS:
         raise ValueError(f"operator must be one of {SPECTRUM_OPERATORS}, got {operator!r}")
-    mass = batch.vertex_mass
-    if operator == "connection":
-        evals, first, weyl, name, option = batch.edge_evals, 0, 2 * torch.pi, "L_c", "k_edge"
-    else:
-        evals, first, weyl, name, option = (
-            batch.vertex_evals,
-            1,
-            4 * torch.pi,
-            "the vertex Laplacian",
-            "k_vertex",
-        )
+    attribute, first, weyl, name, option = _SPECTRA[operator]
+    evals, mass = getattr(batch, attribute), batch.vertex_mass
     if first + count > evals.shape[1]:
         raise ValueError(
             f"spectrum={count} needs at least {first + count} eigenpairs of {name}, the batch has "
