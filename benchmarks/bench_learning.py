@@ -65,7 +65,11 @@ from torch_edgevf.learning.augment import random_stretch, random_warp
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.cache import OperatorCache
 from torch_edgevf.learning.datasets import psb_mesh, psb_path
-from torch_edgevf.learning.precompute import compute_operators, heat_kernel_signature
+from torch_edgevf.learning.precompute import (
+    compute_operators,
+    heat_kernel_signature,
+    mean_curvature_signature,
+)
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
 MODELS = {
@@ -148,6 +152,10 @@ DEFAULT_MODELS = ("edgefieldnet", BASELINE)
 K_EDGE = 32
 OPERATOR_OPTIONS = dict(k_edge=K_EDGE, k_vertex=128, vertex_gradient=True)
 VERTEX_LAPLACIANS = ("cotan", "robust")
+#: input features of every model: the heat kernel signature (16 scales), or it followed by
+#: the signed mean curvature and its heat diffusion at 8 times (9 channels, extrinsic)
+INPUTS = ("hks", "hks+curvature")
+HKS_SCALES = 16
 #: largest stretch factor of the augmented copies (see :func:`stretched`)
 STRETCH = 1.25
 #: epochs whose final weights are averaged (those after the learning rate is halved at 50)
@@ -205,15 +213,17 @@ def without_degenerate_faces(v, f):
 
 
 def precompute(
-    dataset: dict, cache_dir, vertex_laplacian: str = "cotan", k_edge: int = K_EDGE
+    dataset: dict, cache_dir, vertex_laplacian: str = "cotan", k_edge: int = K_EDGE, inputs: str = "hks"
 ) -> tuple[list[MeshBatch], list[float]]:
     """One single-mesh batch per mesh (operators cached), and the seconds of each mesh computed.
 
     ``vertex_laplacian``: the Laplacian of the vertex eigenbasis, of the heat kernel
     signatures and of the vertex diffusion (``"robust"``: DiffusionNet's intrinsic
     Delaunay Laplacian, see :func:`compute_operators`); ``k_edge``: the eigenpairs of
-    ``L_c``.
+    ``L_c``; ``inputs``: one of :data:`INPUTS`.
     """
+    if inputs not in INPUTS:
+        raise ValueError(f"inputs must be one of {INPUTS}, got {inputs!r}")
     options = operator_options(vertex_laplacian, k_edge)
     cache = OperatorCache(cache_dir)
     batches, computed = [], []
@@ -224,9 +234,14 @@ def precompute(
             t = time.perf_counter()
             ops = cache.get(v, f, **options)
             computed.append(time.perf_counter() - t)
-        x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16).float()
+        x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=HKS_SCALES).float()
         if not bool((x > 0).all()):  # at least the constant mode's term: else the eigenpairs are wrong
             raise ValueError(f"mesh of {len(v)} vertices: heat kernel signatures not all positive")
+        if inputs == "hks+curvature":
+            h = mean_curvature_signature(
+                ops.verts, ops.faces, ops.vertex_evals, ops.vertex_evecs, ops.vertex_mass
+            )
+            x = torch.cat([x, h.float()], dim=1)
         batches.append(MeshBatch.from_operators(ops.to(torch.float32), x, int(label)))
     return batches, computed
 
@@ -251,6 +266,7 @@ def precompute_copies(
     spread: float = STRETCH,
     warp: float = 0.0,
     k_edge: int = K_EDGE,
+    inputs: str = "hks",
 ) -> list[list[MeshBatch]]:
     """Per mesh, the batches of its ``copies`` stretched copies (:func:`stretched`, by
     factors up to ``spread``, warped with strain ``warp``; none for meshes where ``keep``
@@ -268,7 +284,7 @@ def precompute_copies(
             copy = stretched(v, int(i), c, spread, warp)
             one = {"meshes": [(copy, f)], "labels": dataset["labels"][i : i + 1]}
             try:
-                out[i] += precompute(one, cache_dir, vertex_laplacian, k_edge)[0]
+                out[i] += precompute(one, cache_dir, vertex_laplacian, k_edge, inputs)[0]
             except ValueError as e:
                 dropped.append(f"mesh {int(i)} copy {c}: {str(e)[:80]}")
     if dropped:
@@ -340,6 +356,8 @@ def new_model(name: str, batch, num_classes: int, seed: int, weight_decay: float
     or AdamW (decoupled weight decay) with ``weight_decay > 0``."""
     torch.manual_seed(seed)
     model = MODELS[name](batch.features.shape[1], num_classes)
+    if model.log_features is True and batch.features.shape[1] > HKS_SCALES:
+        model.log_features = HKS_SCALES  # the channels after the HKS (mean curvature) are signed
     if weight_decay > 0:
         return model, torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=weight_decay)
     return model, torch.optim.Adam(model.parameters(), lr=1e-3)
@@ -557,6 +575,8 @@ def label(r: dict) -> str:
     name = r["model"] if lap == "cotan" else f"{r['model']} ({lap} Laplacian)"
     if r.get("k_edge", K_EDGE) != K_EDGE:
         name += f" ({r['k_edge']} edge eigenpairs)"
+    if r.get("input", "hks") != "hks":
+        name += ", mean curvature input"
     if r.get("augment"):
         name += f", {r['augment']} stretched copies"
         if r.get("stretch", STRETCH) != STRETCH:
@@ -808,6 +828,14 @@ def main(argv=None) -> list[dict]:
         "(robust: DiffusionNet's intrinsic Delaunay Laplacian; needs robust_laplacian)",
     )
     p.add_argument(
+        "--input",
+        default="hks",
+        choices=INPUTS,
+        help="input features of every model: the heat kernel signature (16 scales), or it followed by "
+        "the signed mean curvature and its heat diffusion at 8 times (extrinsic: tells creases and "
+        "bends, which the HKS does not see)",
+    )
+    p.add_argument(
         "--k-edge",
         type=int,
         default=K_EDGE,
@@ -944,7 +972,7 @@ def main(argv=None) -> list[dict]:
             ms = ", ".join(f"{1e3 * t:.0f}" for t in ts)
             print(f"{name}: {ms} ms per mesh; mean vs diffusionnet {statistics.mean(ts) / base:.2f}")
         return [{"model": n, "seconds_per_mesh": ts} for n, ts in times.items()]
-    batches, computed = precompute(dataset, a.cache, a.vertex_laplacian, a.k_edge)
+    batches, computed = precompute(dataset, a.cache, a.vertex_laplacian, a.k_edge, a.input)
     if a.step_time:
         times = step_times(names, batches, len(dataset["classes"]), rounds=a.rounds)
         against = _base(times)
@@ -970,7 +998,9 @@ def main(argv=None) -> list[dict]:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)
     tested = np.any([m for _, _, m in evaluations], axis=0)
-    options = dict(vertex_laplacian=a.vertex_laplacian, spread=a.stretch, warp=a.warp, k_edge=a.k_edge)
+    options = dict(
+        vertex_laplacian=a.vertex_laplacian, spread=a.stretch, warp=a.warp, k_edge=a.k_edge, inputs=a.input
+    )
     copies = precompute_copies(dataset, a.cache, a.augment, trained, **options)
     tta_copies = precompute_copies(dataset, a.cache, a.tta, tested, **options)
     for split_name, train_mask, test_mask in evaluations:
@@ -1008,6 +1038,8 @@ def main(argv=None) -> list[dict]:
                     r["vertex_laplacian"] = a.vertex_laplacian
                 if a.k_edge != K_EDGE:
                     r["k_edge"] = a.k_edge
+                if a.input != "hks":
+                    r["input"] = a.input
                 if a.weight_decay:
                     r["weight_decay"] = a.weight_decay
                 if a.schedule != "step":

@@ -90,8 +90,13 @@ def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean
         raise ValueError(f"head must be one of {_HEADS}, got {head!r}")
     if pool not in _POOLS:
         raise ValueError(f"pool must be one of {_POOLS}, got {pool!r}")
-    if not isinstance(log_features, bool):
-        raise ValueError(f"log_features must be True or False, got {log_features!r}")
+    if not isinstance(log_features, (bool, int)) or not (
+        isinstance(log_features, bool) or 1 <= log_features <= in_channels
+    ):
+        raise ValueError(
+            f"log_features must be True, False or a number of channels in [1, {in_channels}], "
+            f"got {log_features!r}"
+        )
 
 
 def _check_dropout(**probabilities) -> None:
@@ -139,18 +144,21 @@ def _last_layer(width: int, out_channels: int, head: str, pool: str) -> nn.Linea
 
 
 def _inputs(model: nn.Module, batch) -> torch.Tensor:
-    """The features, through ``log`` when the model takes logarithms (positive features only)."""
+    """The features, through ``log`` when the model takes logarithms (positive features
+    only): of every channel with ``log_features=True``, of the first ``k`` with ``k``."""
     f = batch.features
-    if not model.log_features:
+    if model.log_features is False:
         return f
-    bad = ~(f > 0)
+    k = f.shape[1] if model.log_features is True else int(model.log_features)
+    bad = ~(f[:, :k] > 0)
     if bad.any():
         v, c = (int(i) for i in bad.nonzero()[0])
         raise ValueError(
-            f"log_features=True needs positive features (such as heat kernel signatures), "
-            f"got {float(f[v, c])} at vertex {v}, channel {c}"
+            f"log_features={model.log_features!r} needs positive features in the channels it takes "
+            f"the logarithm of (such as heat kernel signatures), got {float(f[v, c])} at vertex {v}, "
+            f"channel {c}"
         )
-    return torch.log(f)
+    return torch.cat([torch.log(f[:, :k]), f[:, k:]], dim=1) if k < f.shape[1] else torch.log(f)
 
 
 def _readout(x, last: nn.Linear, batch, head: str, pool: str, drop: nn.Module | None = None) -> torch.Tensor:
@@ -548,10 +556,12 @@ class EdgeFieldNet(nn.Module):
         Readout of ``head="global"``: the mass-weighted mean and standard deviation of
         the last block's scalars, then a linear layer (default); or a linear layer per
         vertex, then the mass-weighted mean (DiffusionNet's readout).
-    log_features : bool
+    log_features : bool or int
         Take the logarithm of the input features first (for positive features whose
         scales span orders of magnitude, such as heat kernel signatures; others raise
-        ``ValueError``).
+        ``ValueError``); an integer ``k``: of the first ``k`` channels only (heat kernel
+        signatures first, signed features such as ``precompute.mean_curvature_signature``
+        after them).
     readout_fields : bool
         The readout also takes the fields of the vector stream (the sum of every block's
         fields): their invariant products ``tanh Re(z conj(z A))`` with a learned complex
@@ -585,7 +595,7 @@ class EdgeFieldNet(nn.Module):
         vector: str = "edge",
         learn_times: bool = True,
         pool: str = "mean_std",
-        log_features: bool = False,
+        log_features: bool | int = False,
         high_pass: bool = False,
         vector_dropout: float = 0.0,
         head_dropout: float = 0.0,
@@ -711,7 +721,7 @@ class DiffusionNet(nn.Module):
         dropout: float = 0.5,
         head: str = "global",
         pool: str = "mean",
-        log_features: bool = False,
+        log_features: bool | int = False,
         head_dropout: float = 0.0,
         spectrum: int = 0,
         spectrum_of: str = "connection",
