@@ -356,7 +356,7 @@ def new_model(name: str, batch, num_classes: int, seed: int, weight_decay: float
     or AdamW (decoupled weight decay) with ``weight_decay > 0``."""
     torch.manual_seed(seed)
     model = MODELS[name](batch.features.shape[1], num_classes)
-    if model.log_features is True and batch.features.shape[1] > HKS_SCALES:
+    if getattr(model, "log_features", False) is True and batch.features.shape[1] > HKS_SCALES:
         model.log_features = HKS_SCALES  # the channels after the HKS (mean curvature) are signed
     if weight_decay > 0:
         return model, torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=weight_decay)

@@ -521,7 +521,7 @@ def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatc
     v = np.random.default_rng(1).standard_normal((6, 3))
     dataset = {"meshes": [(v, None), (v + 1, None), (v, None)], "labels": np.array([0, 1, 2])}
 
-    def fake_precompute(one, cache_dir, vertex_laplacian="cotan", k_edge=32):
+    def fake_precompute(one, cache_dir, vertex_laplacian="cotan", k_edge=32, inputs="hks"):
         (w, _), label = one["meshes"][0], int(one["labels"][0])
         if label == 1 and np.allclose(w, bench.stretched(v + 1, 1, 0)):
             raise ValueError("eigsh: Lanczos did not converge")
@@ -584,6 +584,39 @@ def test_edge_eigenpairs_reach_the_operators_and_the_run_label(bench):
     run = {"model": "edgefieldnet", "augment": 4}
     assert bench.label(dict(run, k_edge=48)) == "edgefieldnet (48 edge eigenpairs), 4 stretched copies"
     assert bench.label(dict(run, k_edge=32)) == "edgefieldnet, 4 stretched copies"
+
+
+def test_curvature_input_follows_the_hks_and_only_the_hks_are_logged(bench, tmp_path):
+    import torch_edgevf as ev
+    from torch_edgevf.learning.precompute import heat_kernel_signature, mean_curvature_signature
+
+    v, f = ev.icosphere(3)
+    v = v * torch.tensor([1.0, 0.7, 0.5], dtype=v.dtype)  # an ellipsoid: the curvature varies
+    dataset = {"meshes": [(v.numpy(), f.numpy())], "labels": np.array([2])}
+    (plain,), _ = bench.precompute(dataset, tmp_path)
+    (both,), _ = bench.precompute(dataset, tmp_path, inputs="hks+curvature")
+    assert plain.features.shape[1] == bench.HKS_SCALES == 16 and both.features.shape[1] == 16 + 9
+    torch.testing.assert_close(both.features[:, :16], plain.features)
+    ops = bench.OperatorCache(tmp_path).get(v.numpy(), f.numpy(), **bench.OPERATOR_OPTIONS)
+    h = mean_curvature_signature(ops.verts, ops.faces, ops.vertex_evals, ops.vertex_evecs, ops.vertex_mass)
+    torch.testing.assert_close(both.features[:, 16:], h.float())
+    assert float(both.features[:, 16:].min()) < 0.5 < float(both.features[:, 16:].max())
+    torch.testing.assert_close(
+        plain.features, heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16).float()
+    )
+    edge, _ = bench.new_model("edgefieldnet", both, 3, seed=0)
+    vertex, _ = bench.new_model("diffusionnet-nodropout", both, 3, seed=0)
+    assert edge.log_features == 16 and vertex.log_features is False
+    assert bench.new_model("edgefieldnet", plain, 3, seed=0)[0].log_features is True
+    assert torch.isfinite(edge(both)).all() and torch.isfinite(vertex(both)).all()
+    run = {"model": "edgefieldnet", "augment": 4}
+    assert (
+        bench.label(dict(run, input="hks+curvature"))
+        == "edgefieldnet, mean curvature input, 4 stretched copies"
+    )
+    assert bench.label(dict(run, input="hks")) == "edgefieldnet, 4 stretched copies"
+    with pytest.raises(ValueError, match="inputs must be one of"):
+        bench.precompute(dataset, tmp_path, inputs="xyz")
 
 
 def test_schedules_halve_or_decay_the_rate_along_a_cosine(bench):

@@ -396,9 +396,31 @@ def test_log_features_need_positive_features(mesh):
         net(b)
 
 
+@pytest.mark.parametrize("cls", [models.EdgeFieldNet, models.DiffusionNet])
+def test_log_features_of_the_first_channels_only(mesh, cls):
+    """``log_features=k`` takes the logarithm of the first ``k`` channels and passes the
+    rest (signed features) as they are; a non-positive value among the first ``k`` is named."""
+    b = _batch(*mesh)
+    signed = torch.randn(b.num_vertices, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    b.features = torch.cat([b.features, signed], dim=1)
+    torch.manual_seed(0)
+    net = cls(11, 5, width=8, num_blocks=1, log_features=8).double()
+    expected = torch.cat([torch.log(b.features[:, :8]), signed], dim=1)
+    torch.testing.assert_close(models._inputs(net, b), expected)
+    assert torch.isfinite(net(b)).all()
+    b.features[3, 5] = 0.0
+    with pytest.raises(ValueError, match="log_features=8 needs positive features.*vertex 3, channel 5"):
+        net(b)
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
-    [(dict(pool="max"), "pool must be one of"), (dict(log_features=1), "log_features must be True or False")],
+    [
+        (dict(pool="max"), "pool must be one of"),
+        (dict(log_features=0), r"log_features must be True, False or a number of channels in \[1, 8\]"),
+        (dict(log_features=9), r"number of channels in \[1, 8\], got 9"),
+        (dict(log_features=2.5), "log_features must be True, False"),
+    ],
 )
 def test_bad_readout_options_are_named(kwargs, match):
     for cls in (models.EdgeFieldNet, models.DiffusionNet):

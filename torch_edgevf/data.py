@@ -24,6 +24,7 @@ from .learning.precompute import (
     MeshOperators,
     compute_operators,
     heat_kernel_signature,
+    mean_curvature_signature,
     vertex_gradient_operator,
 )
 from .learning.progress import (
@@ -47,6 +48,7 @@ __all__ = [
     "MeshOperators",
     "compute_operators",
     "heat_kernel_signature",
+    "mean_curvature_signature",
     "vertex_gradient_operator",
     "progress",
     "find_degenerate_faces",
