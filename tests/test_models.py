@@ -406,7 +406,7 @@ def test_log_features_of_the_first_channels_only(mesh, cls):
     torch.manual_seed(0)
     net = cls(11, 5, width=8, num_blocks=1, log_features=8).double()
     expected = torch.cat([torch.log(b.features[:, :8]), signed], dim=1)
-    torch.testing.assert_close(models._inputs(net, b), expected)
+    torch.testing.assert_close(models._inputs(net.log_features, b), expected)
     assert torch.isfinite(net(b)).all()
     b.features[3, 5] = 0.0
     with pytest.raises(ValueError, match="log_features=8 needs positive features.*vertex 3, channel 5"):

@@ -143,18 +143,18 @@ def _last_layer(width: int, out_channels: int, head: str, pool: str) -> nn.Linea
     return nn.Linear(2 * width if head == "global" and pool == "mean_std" else width, out_channels)
 
 
-def _inputs(model: nn.Module, batch) -> torch.Tensor:
+def _inputs(log_features: bool | int, batch) -> torch.Tensor:
     """The features, through ``log`` when the model takes logarithms (positive features
     only): of every channel with ``log_features=True``, of the first ``k`` with ``k``."""
     f = batch.features
-    if model.log_features is False:
+    if log_features is False:
         return f
-    k = f.shape[1] if model.log_features is True else int(model.log_features)
+    k = f.shape[1] if log_features is True else int(log_features)
     bad = ~(f[:, :k] > 0)
     if bad.any():
         v, c = (int(i) for i in bad.nonzero()[0])
         raise ValueError(
-            f"log_features={model.log_features!r} needs positive features in the channels it takes "
+            f"log_features={log_features!r} needs positive features in the channels it takes "
             f"the logarithm of (such as heat kernel signatures), got {float(f[v, c])} at vertex {v}, "
             f"channel {c}"
         )
@@ -657,7 +657,7 @@ class EdgeFieldNet(nn.Module):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
         _check_batch(batch, self.in_channels, needs)
         _check_dtype(self, batch)
-        x, z = self.first(_inputs(self, batch)), None
+        x, z = self.first(_inputs(self.log_features, batch)), None
         keep = None
         if self.training and self.stream_dropout > 0:
             keep = torch.rand(batch.num_meshes, device=x.device) >= self.stream_dropout
@@ -741,7 +741,7 @@ class DiffusionNet(nn.Module):
     def forward(self, batch):
         _check_batch(batch, self.in_channels, ("vertex_gradient",))
         _check_dtype(self, batch)
-        x = self.first(_inputs(self, batch))
+        x = self.first(_inputs(self.log_features, batch))
         for block in self.blocks:
             x = block(x, batch)
         logits = _readout(x, self.last, batch, self.head, self.pool, self.head_dropout)
