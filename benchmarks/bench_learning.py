@@ -13,7 +13,9 @@ One command reproduces the learning table of the README::
 
 Every model is trained with the same recipe, on the same operators, inputs, seeds and
 threads, one after the other in this process: the 16-scale heat kernel signature of the
-vertex Laplacian as input (every model is invariant to rigid motions), one mesh per
+vertex Laplacian as input (every model is invariant to rigid motions; ``--input
+hks+curvature`` appends the signed mean curvature and its heat diffusion, extrinsic
+features that the models' logarithm leaves out), one mesh per
 optimiser step, Adam at ``1e-3`` halved every 50 epochs, label smoothing 0.2, dropout 0.5
 in the per-vertex MLPs (none in the ``-nodropout`` models: the faithful DiffusionNet is
 built without it, as its public classification script builds it). The accuracy reported
