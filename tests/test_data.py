@@ -180,6 +180,17 @@ def test_mean_curvature_signature_tells_a_fold_from_a_flat_sheet():
     torch.testing.assert_close(back, -out[1][1], atol=1e-8, rtol=1e-6)
 
 
+def test_mean_curvature_signature_gradcheck_in_the_vertices():
+    v, f = perturbed_icosphere(1, 0.1, seed=6)
+    lam, phi, m = _constant_basis(v, f)
+    lam = torch.tensor([0.0, 2.0], dtype=torch.float64)
+    phi = torch.cat([phi, torch.linspace(-1, 1, v.shape[0], dtype=torch.float64)[:, None]], dim=1)
+    x0 = v.clone().requires_grad_(True)
+    assert torch.autograd.gradcheck(
+        lambda x: data.mean_curvature_signature(x, f, lam, phi, m, count=2), (x0,)
+    )
+
+
 def test_mean_curvature_signature_bad_arguments_are_named():
     v, f = perturbed_icosphere(1, 0.05, seed=3)
     lam, phi, m = _constant_basis(v, f)

@@ -369,9 +369,10 @@ def mean_curvature_signature(
     :func:`heat_kernel_signature`. On a closed mesh the sign is that of the outward
     normal (positive where the surface is convex), whatever the orientation of the faces;
     on a mesh with boundary it follows the orientation of the faces. Invariant to rigid
-    motions, to scaling, to the numbering and to the sign of each eigenvector. The heat
-    kernel signature is intrinsic (the same on every isometric bending of a surface);
-    these features are not: they tell a crease from a flat patch.
+    motions, to scaling, to the numbering and to the sign of each eigenvector, and
+    differentiable in every input (computed in float64). The heat kernel signature is
+    intrinsic (the same on every isometric bending of a surface); these features are
+    not: they tell a crease from a flat patch.
 
     Parameters
     ----------
@@ -401,8 +402,7 @@ def mean_curvature_signature(
     if not isinstance(count, int) or isinstance(count, bool) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
     dtype = evecs.dtype
-    x = verts.detach().to(torch.float64)
-    m = mass.detach().to(torch.float64)
+    x, m = verts.to(torch.float64), mass.to(torch.float64)
     normal_curvature = (ops.cotan_laplacian(x, topo) @ x) / (2 * m[:, None])
     h = (normal_curvature * vertex_normals(x, topo)).sum(1)
     p = x[topo.faces]
@@ -412,7 +412,7 @@ def mean_curvature_signature(
     h = h * torch.sqrt(area / (4 * torch.pi))
     if times is None:
         times = torch.logspace(-2, 0, count, dtype=torch.float64)
-    lam, phi = evals.detach().to(torch.float64), evecs.detach().to(torch.float64)
+    lam, phi = evals.to(torch.float64), evecs.to(torch.float64)
     weights = torch.exp(-lam[None, :] * area * torch.as_tensor(times, dtype=torch.float64)[:, None])
     diffused = phi @ (weights.transpose(0, 1) * (phi.transpose(0, 1) @ (m * h))[:, None])
     out = torch.cat([h[:, None], diffused], dim=1)
