@@ -21,6 +21,7 @@ from ..linalg import eigsh
 from ..mesh.geometry import face_areas, face_normals, vertex_normals
 from ..mesh.topology import Topology
 from ..operators import functional as ops
+from .layers import spectral_diffusion
 
 __all__ = [
     "MeshFields",
@@ -324,6 +325,11 @@ def compute_operators(
     return out if dtype == torch.float64 else out.to(dtype)
 
 
+def _signature_times(times, count: int, dtype: torch.dtype) -> torch.Tensor:
+    """The diffusion times of the signatures: ``times``, or ``count`` log-spaced in ``[1e-2, 1]``."""
+    return torch.logspace(-2, 0, count, dtype=dtype) if times is None else torch.as_tensor(times, dtype=dtype)
+
+
 def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) -> torch.Tensor:
     r"""Heat kernel signature per vertex, scale normalised (intrinsic input features).
 
@@ -348,10 +354,9 @@ def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) 
         raise ValueError(
             f"evals (k,) and evecs (V, k) do not match: {tuple(evals.shape)}, {tuple(evecs.shape)}"
         )
-    if times is None:
-        times = torch.logspace(-2, 0, count, dtype=evals.dtype)
+    times = _signature_times(times, count, evals.dtype)
     area = torch.as_tensor(1.0 if area is None else area, dtype=evals.dtype)
-    weights = torch.exp(-evals[None, :] * area * times.to(evals.dtype)[:, None])  # (T, k)
+    weights = torch.exp(-evals[None, :] * area * times[:, None])  # (T, k)
     return area * (evecs**2) @ weights.transpose(0, 1)
 
 
@@ -405,16 +410,13 @@ def mean_curvature_signature(
     x, m = verts.to(torch.float64), mass.to(torch.float64)
     normal_curvature = (ops.cotan_laplacian(x, topo) @ x) / (2 * m[:, None])
     h = (normal_curvature * vertex_normals(x, topo)).sum(1)
-    p = x[topo.faces]
-    if 3 * topo.num_faces == 2 * topo.num_edges and torch.linalg.det(p).sum() < 0:
+    if topo.is_closed and torch.linalg.det(x[topo.faces]).sum() < 0:
         h = -h  # a closed mesh with inward-facing faces: the outward normal is the other one
     area = face_areas(x, topo).sum()
     h = h * torch.sqrt(area / (4 * torch.pi))
-    if times is None:
-        times = torch.logspace(-2, 0, count, dtype=torch.float64)
+    times = _signature_times(times, count, torch.float64)
     lam, phi = evals.to(torch.float64), evecs.to(torch.float64)
-    weights = torch.exp(-lam[None, :] * area * torch.as_tensor(times, dtype=torch.float64)[:, None])
-    diffused = phi @ (weights.transpose(0, 1) * (phi.transpose(0, 1) @ (m * h))[:, None])
+    diffused = spectral_diffusion(h[:, None].expand(-1, times.shape[0]), lam, phi, m, area * times)
     out = torch.cat([h[:, None], diffused], dim=1)
     if compress:
         out = torch.sign(out) * torch.log1p(out.abs())
