@@ -74,78 +74,81 @@ from torch_edgevf.learning.precompute import (
 )
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
+#: the models by name, each built from its input and output channels and, for the networks
+#: that read logarithms, ``log_features``: True (every channel, the HKS) or the number of
+#: HKS channels before signed ones (``--input hks+curvature``)
 MODELS = {
     # the recommended edge-field network: log-HKS in, mean and deviation out
-    "edgefieldnet": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, log_features=True),
-    "diffusionnet": lambda c_in, c_out: models.DiffusionNet(c_in, c_out),
+    "edgefieldnet": lambda c_in, c_out, log: models.EdgeFieldNet(c_in, c_out, log_features=log),
+    "diffusionnet": lambda c_in, c_out, log: models.DiffusionNet(c_in, c_out),
     # DiffusionNet without dropout, as its public classification script builds it
-    "diffusionnet-nodropout": lambda c_in, c_out: models.DiffusionNet(c_in, c_out, dropout=0.0),
+    "diffusionnet-nodropout": lambda c_in, c_out, log: models.DiffusionNet(c_in, c_out, dropout=0.0),
     # DiffusionNet with the edge-field network's input and readout (a fairness check)
-    "diffusionnet-logstd": lambda c_in, c_out: models.DiffusionNet(
-        c_in, c_out, pool="mean_std", log_features=True
+    "diffusionnet-logstd": lambda c_in, c_out, log: models.DiffusionNet(
+        c_in, c_out, pool="mean_std", log_features=log
     ),
     # ablations of the edge-field network
-    "edgefieldnet-scalar": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, vector="none", log_features=True
+    "edgefieldnet-scalar": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, vector="none", log_features=log
     ),
-    "edgefieldnet-vertexvec": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, vector="vertex", log_features=True
+    "edgefieldnet-vertexvec": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, vector="vertex", log_features=log
     ),
-    "edgefieldnet-fixedtime": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, learn_times=False, log_features=True
+    "edgefieldnet-fixedtime": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, learn_times=False, log_features=log
     ),
-    "edgefieldnet-meanpool": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, pool="mean", log_features=True
+    "edgefieldnet-meanpool": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, pool="mean", log_features=log
     ),
     # the fields' high frequencies (what the L_c diffusion removes) added back, learned
-    "edgefieldnet-highpass": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, high_pass=True
+    "edgefieldnet-highpass": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, high_pass=True
     ),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
-    "edgefieldnet-headdrop": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, head_dropout=0.5
+    "edgefieldnet-headdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, head_dropout=0.5
     ),
-    "edgefieldnet-vecdrop": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, vector_dropout=0.5
+    "edgefieldnet-vecdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, vector_dropout=0.5
     ),
     # the vector stream dropped as a whole for half of the training steps (modality dropout)
-    "edgefieldnet-streamdrop": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, stream_dropout=0.5
+    "edgefieldnet-streamdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, stream_dropout=0.5
     ),
     # 8 complex channels in the vector stream in place of 16
-    "edgefieldnet-vec8": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, vector_width=8
+    "edgefieldnet-vec8": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, vector_width=8
     ),
     # 8 complex channels and 4 blocks: DiffusionNet's depth at the cost of 3 full blocks
-    "edgefieldnet-vec8-4blocks": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, vector_width=8, num_blocks=4
+    "edgefieldnet-vec8-4blocks": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, vector_width=8, num_blocks=4
     ),
     # the accumulated fields' invariants pooled beside the last scalars in the readout
-    "edgefieldnet-fieldread": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, readout_fields=True
+    "edgefieldnet-fieldread": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, readout_fields=True
     ),
     # no dropout in the MLPs (as DiffusionNet's public classification script has it)
-    "edgefieldnet-nodropout": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, dropout=0.0
+    "edgefieldnet-nodropout": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, dropout=0.0
     ),
     # no dropout and 8 complex channels: the two cheapest changes to the step together
-    "edgefieldnet-vec8-nodropout": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, vector_width=8, dropout=0.0
+    "edgefieldnet-vec8-nodropout": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, vector_width=8, dropout=0.0
     ),
     # the logits also take the first 32 eigenvalues of L_c (models.spectrum_features)
-    "edgefieldnet-spectrum": lambda c_in, c_out: models.EdgeFieldNet(
-        c_in, c_out, log_features=True, spectrum=K_EDGE
+    "edgefieldnet-spectrum": lambda c_in, c_out, log: models.EdgeFieldNet(
+        c_in, c_out, log_features=log, spectrum=K_EDGE
     ),
     # the faithful DiffusionNet given the same eigenvalues (the control of the one above)
-    "diffusionnet-nodropout-spectrum": lambda c_in, c_out: models.DiffusionNet(
+    "diffusionnet-nodropout-spectrum": lambda c_in, c_out, log: models.DiffusionNet(
         c_in, c_out, dropout=0.0, spectrum=K_EDGE
     ),
     # its control: the first 32 eigenvalues of the vertex Laplacian in place of those of L_c
-    "diffusionnet-nodropout-lbspectrum": lambda c_in, c_out: models.DiffusionNet(
+    "diffusionnet-nodropout-lbspectrum": lambda c_in, c_out, log: models.DiffusionNet(
         c_in, c_out, dropout=0.0, spectrum=K_EDGE, spectrum_of="laplacian"
     ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
-    "edgefieldnet-rawmean": lambda c_in, c_out: models.EdgeFieldNet(c_in, c_out, pool="mean"),
+    "edgefieldnet-rawmean": lambda c_in, c_out, log: models.EdgeFieldNet(c_in, c_out, pool="mean"),
 }
 #: the faithful DiffusionNet: as its public classification script builds it (no dropout)
 BASELINE = "diffusionnet-nodropout"
@@ -357,9 +360,9 @@ def new_model(name: str, batch, num_classes: int, seed: int, weight_decay: float
     """Model ``name`` initialised from ``seed``, and its optimiser at the recipe's rate: Adam,
     or AdamW (decoupled weight decay) with ``weight_decay > 0``."""
     torch.manual_seed(seed)
-    model = MODELS[name](batch.features.shape[1], num_classes)
-    if getattr(model, "log_features", False) is True and batch.features.shape[1] > HKS_SCALES:
-        model.log_features = HKS_SCALES  # the channels after the HKS (mean curvature) are signed
+    channels = batch.features.shape[1]
+    # the channels after the HKS (the mean curvature) are signed: no logarithm of them
+    model = MODELS[name](channels, num_classes, True if channels <= HKS_SCALES else HKS_SCALES)
     if weight_decay > 0:
         return model, torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=weight_decay)
     return model, torch.optim.Adam(model.parameters(), lr=1e-3)

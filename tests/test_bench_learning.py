@@ -147,7 +147,7 @@ def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(ben
     assert bench.DEFAULT_MODELS == ("edgefieldnet", bench.BASELINE)
 
     def dropouts(name):
-        return [m.p for m in bench.MODELS[name](16, 19).modules() if isinstance(m, torch.nn.Dropout)]
+        return [m.p for m in bench.MODELS[name](16, 19, True).modules() if isinstance(m, torch.nn.Dropout)]
 
     assert dropouts(bench.BASELINE) == []
     assert dropouts("diffusionnet") == [0.5] * 8  # 4 blocks, 2 hidden layers each
@@ -168,9 +168,9 @@ def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_s
         (bench.BASELINE + "-lbspectrum", bench.BASELINE),
     ):
         torch.manual_seed(0)
-        net = bench.MODELS[name](16, 19)
+        net = bench.MODELS[name](16, 19, True)
         torch.manual_seed(0)
-        ref = bench.MODELS[base](16, 19).state_dict()
+        ref = bench.MODELS[base](16, 19, True).state_dict()
         assert (net.spectrum.in_features, net.spectrum.out_features) == (bench.K_EDGE, 19)
         assert net.spectrum_of == ("laplacian" if "lbspectrum" in name else "connection")
         rest = {k: w for k, w in net.state_dict().items() if not k.startswith("spectrum.")}
@@ -368,7 +368,7 @@ def test_vertex_laplacian_options_and_rows(bench):
 class _MeanLinear(torch.nn.Module):
     """A stand-in model: a linear map of each mesh's mean feature, with dropout."""
 
-    def __init__(self, c_in, c_out):
+    def __init__(self, c_in, c_out, log_features=False):
         super().__init__()
         self.linear, self.drop = torch.nn.Linear(c_in, c_out), torch.nn.Dropout(0.5)
 
