@@ -310,6 +310,11 @@ _DROPOUT_ALIKE = "diffusionnet, 4 stretched copies, averaged last 10"
 _ABLATIONS = [
     f"edgefieldnet-{a}, 4 stretched copies, averaged last 10" for a in ("scalar", "vertexvec", "fixedtime")
 ]
+#: both networks with the mean curvature signature after the HKS (``--input hks+curvature``)
+_CURVATURE = [
+    f"{m}, mean curvature input, 4 stretched copies, coefficients, averaged last 10"
+    for m in ("edgefieldnet", "diffusionnet-nodropout")
+]
 #: (reference, partitions, phrase, rows): the phrase with the rows' p-values against the
 #: reference (the earlier runs where it is empty) on the folds of those partitions (None:
 #: all), as the table prints them
@@ -329,6 +334,9 @@ README_P_VALUES = [
     (RERUN, None, "p = {} against the first and {} against the second", ["diffusionnet-nodropout", _ALIKE]),
     (RERUN, None, "with a second partition of the folds, p = {} over both", ["diffusionnet-nodropout"]),
     (RERUN, None, "run on it) the three losses are significant: p = {}, {} and {}", _ABLATIONS),
+    (_CURVATURE[1], (0,), "the gain is DiffusionNet's (p = {} against it trained alike", [_ALIKE]),
+    (_CURVATURE[0], (0,), "the edge-field network's is none (p = {})", [RERUN]),
+    (_CURVATURE[1], (0,), "edge-field network on the HKS alone (1,086 against 1,085, p = {})", [RERUN]),
     (
         RERUN.removesuffix(", averaged last 10"),
         None,
