@@ -74,87 +74,63 @@ from torch_edgevf.learning.precompute import (
 )
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
 
+#: eigenpairs of ``L_c`` (the edge eigenbasis of the vector stream) unless ``--k-edge``
+K_EDGE = 32
+
+
+def _model(network, logs: bool = False, **options):
+    """A factory of ``network`` with ``options``: ``(c_in, c_out, log) -> model``; with
+    ``logs`` the network reads logarithms, ``log_features=log`` (see :func:`new_model`)."""
+    return lambda c_in, c_out, log: network(c_in, c_out, **({"log_features": log} if logs else {}), **options)
+
+
 #: the models by name, each built from its input and output channels and, for the networks
 #: that read logarithms, ``log_features``: True (every channel, the HKS) or the number of
 #: HKS channels before signed ones (``--input hks+curvature``)
 MODELS = {
     # the recommended edge-field network: log-HKS in, mean and deviation out
-    "edgefieldnet": lambda c_in, c_out, log: models.EdgeFieldNet(c_in, c_out, log_features=log),
-    "diffusionnet": lambda c_in, c_out, log: models.DiffusionNet(c_in, c_out),
+    "edgefieldnet": _model(models.EdgeFieldNet, logs=True),
+    "diffusionnet": _model(models.DiffusionNet),
     # DiffusionNet without dropout, as its public classification script builds it
-    "diffusionnet-nodropout": lambda c_in, c_out, log: models.DiffusionNet(c_in, c_out, dropout=0.0),
+    "diffusionnet-nodropout": _model(models.DiffusionNet, dropout=0.0),
     # DiffusionNet with the edge-field network's input and readout (a fairness check)
-    "diffusionnet-logstd": lambda c_in, c_out, log: models.DiffusionNet(
-        c_in, c_out, pool="mean_std", log_features=log
-    ),
+    "diffusionnet-logstd": _model(models.DiffusionNet, logs=True, pool="mean_std"),
     # ablations of the edge-field network
-    "edgefieldnet-scalar": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, vector="none", log_features=log
-    ),
-    "edgefieldnet-vertexvec": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, vector="vertex", log_features=log
-    ),
-    "edgefieldnet-fixedtime": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, learn_times=False, log_features=log
-    ),
-    "edgefieldnet-meanpool": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, pool="mean", log_features=log
-    ),
+    "edgefieldnet-scalar": _model(models.EdgeFieldNet, logs=True, vector="none"),
+    "edgefieldnet-vertexvec": _model(models.EdgeFieldNet, logs=True, vector="vertex"),
+    "edgefieldnet-fixedtime": _model(models.EdgeFieldNet, logs=True, learn_times=False),
+    "edgefieldnet-meanpool": _model(models.EdgeFieldNet, logs=True, pool="mean"),
     # the fields' high frequencies (what the L_c diffusion removes) added back, learned
-    "edgefieldnet-highpass": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, high_pass=True
-    ),
+    "edgefieldnet-highpass": _model(models.EdgeFieldNet, logs=True, high_pass=True),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
-    "edgefieldnet-headdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, head_dropout=0.5
-    ),
-    "edgefieldnet-vecdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, vector_dropout=0.5
-    ),
+    "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
+    "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),
     # the vector stream dropped as a whole for half of the training steps (modality dropout)
-    "edgefieldnet-streamdrop": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, stream_dropout=0.5
-    ),
+    "edgefieldnet-streamdrop": _model(models.EdgeFieldNet, logs=True, stream_dropout=0.5),
     # 8 complex channels in the vector stream in place of 16
-    "edgefieldnet-vec8": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, vector_width=8
-    ),
+    "edgefieldnet-vec8": _model(models.EdgeFieldNet, logs=True, vector_width=8),
     # 8 complex channels and 4 blocks: DiffusionNet's depth at the cost of 3 full blocks
-    "edgefieldnet-vec8-4blocks": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, vector_width=8, num_blocks=4
-    ),
+    "edgefieldnet-vec8-4blocks": _model(models.EdgeFieldNet, logs=True, vector_width=8, num_blocks=4),
     # the accumulated fields' invariants pooled beside the last scalars in the readout
-    "edgefieldnet-fieldread": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, readout_fields=True
-    ),
+    "edgefieldnet-fieldread": _model(models.EdgeFieldNet, logs=True, readout_fields=True),
     # no dropout in the MLPs (as DiffusionNet's public classification script has it)
-    "edgefieldnet-nodropout": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, dropout=0.0
-    ),
+    "edgefieldnet-nodropout": _model(models.EdgeFieldNet, logs=True, dropout=0.0),
     # no dropout and 8 complex channels: the two cheapest changes to the step together
-    "edgefieldnet-vec8-nodropout": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, vector_width=8, dropout=0.0
-    ),
+    "edgefieldnet-vec8-nodropout": _model(models.EdgeFieldNet, logs=True, vector_width=8, dropout=0.0),
     # the logits also take the first 32 eigenvalues of L_c (models.spectrum_features)
-    "edgefieldnet-spectrum": lambda c_in, c_out, log: models.EdgeFieldNet(
-        c_in, c_out, log_features=log, spectrum=K_EDGE
-    ),
+    "edgefieldnet-spectrum": _model(models.EdgeFieldNet, logs=True, spectrum=K_EDGE),
     # the faithful DiffusionNet given the same eigenvalues (the control of the one above)
-    "diffusionnet-nodropout-spectrum": lambda c_in, c_out, log: models.DiffusionNet(
-        c_in, c_out, dropout=0.0, spectrum=K_EDGE
-    ),
+    "diffusionnet-nodropout-spectrum": _model(models.DiffusionNet, dropout=0.0, spectrum=K_EDGE),
     # its control: the first 32 eigenvalues of the vertex Laplacian in place of those of L_c
-    "diffusionnet-nodropout-lbspectrum": lambda c_in, c_out, log: models.DiffusionNet(
-        c_in, c_out, dropout=0.0, spectrum=K_EDGE, spectrum_of="laplacian"
+    "diffusionnet-nodropout-lbspectrum": _model(
+        models.DiffusionNet, dropout=0.0, spectrum=K_EDGE, spectrum_of="laplacian"
     ),
     # raw HKS in, mean of per-vertex logits out (DiffusionNet's input and readout)
-    "edgefieldnet-rawmean": lambda c_in, c_out, log: models.EdgeFieldNet(c_in, c_out, pool="mean"),
+    "edgefieldnet-rawmean": _model(models.EdgeFieldNet, pool="mean"),
 }
 #: the faithful DiffusionNet: as its public classification script builds it (no dropout)
 BASELINE = "diffusionnet-nodropout"
 DEFAULT_MODELS = ("edgefieldnet", BASELINE)
-#: eigenpairs of ``L_c`` (the edge eigenbasis of the vector stream) unless ``--k-edge``
-K_EDGE = 32
 OPERATOR_OPTIONS = dict(k_edge=K_EDGE, k_vertex=128, vertex_gradient=True)
 VERTEX_LAPLACIANS = ("cotan", "robust")
 #: input features of every model: the heat kernel signature (16 scales), or it followed by
