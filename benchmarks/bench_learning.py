@@ -41,6 +41,8 @@ README for how to build it); operators are cached on disk in ``--cache`` (defaul
 ``.npy`` of one flag per mesh in the file's order (0 train, 1 test, -1 left out);
 ``--validation`` trains on 12 of the 16 training meshes of each class and tests on the
 other 4, leaving the test meshes out, for choosing a design without them.
+``--topology-shift`` tests on the meshes that are not topological spheres in the classes
+that have spheres, and trains on every other mesh (see :func:`topology_shift_flags`).
 
 ``--vertex-laplacian`` chooses the vertex Laplacian of every model (its eigenbasis gives
 the input signatures and the vertex diffusion): ``cotan`` (default) or ``robust``, the
@@ -73,6 +75,7 @@ from torch_edgevf.learning.precompute import (
     mean_curvature_signature,
 )
 from torch_edgevf.mesh.repair import find_degenerate_faces, repair_degenerate_faces
+from torch_edgevf.mesh.topology import Topology
 
 #: eigenpairs of ``L_c`` (the edge eigenbasis of the vector stream) unless ``--k-edge``
 K_EDGE = 32
@@ -288,11 +291,35 @@ def validation_flags(dataset: dict, per_class: int = 4) -> np.ndarray:
     return flags
 
 
-def splits(dataset: dict, folds: int, split_file, validation: bool = False, partition: int = 0):
+def topology_shift_flags(dataset: dict) -> np.ndarray:
+    """A split across topology: 0 train, 1 test.
+
+    The test meshes are those that are not topological spheres (Euler characteristic other
+    than 2) in a class that has spheres; every other mesh trains. Each test mesh so has a
+    topology that no training mesh of its class has (a cup with a handle, where the
+    training cups have none), while a class without spheres trains whole.
+    """
+    labels = np.asarray(dataset["labels"])
+    euler = np.array(
+        [Topology(torch.as_tensor(f), len(v)).euler_characteristic for v, f in dataset["meshes"]]
+    )
+    has_spheres = np.isin(labels, labels[euler == 2])
+    return ((euler != 2) & has_spheres).astype(np.int64)
+
+
+def splits(
+    dataset: dict,
+    folds: int,
+    split_file,
+    validation: bool = False,
+    partition: int = 0,
+    topology_shift: bool = False,
+):
     """``(name, train mask, test mask)`` per evaluation.
 
     The fixed split, a user split (a ``.npy`` of one flag per mesh: 0 train, 1 test, -1
-    left out), the validation split of :func:`validation_flags`, or stratified folds: the
+    left out), the validation split of :func:`validation_flags`, the split across topology
+    of :func:`topology_shift_flags`, or stratified folds: the
     meshes of each class dealt to the ``folds`` folds in an order drawn from ``partition``
     (the same folds for every training seed; another ``partition`` for repeated
     cross-validation).
@@ -308,6 +335,9 @@ def splits(dataset: dict, folds: int, split_file, validation: bool = False, part
     if validation:
         flags = validation_flags(dataset)
         return [("validation", flags == 0, flags == 1)]
+    if topology_shift:
+        flags = topology_shift_flags(dataset)
+        return [("topology", flags == 0, flags == 1)]
     if split_file:
         flags = np.load(split_file)
         if flags.shape != (n,) or not np.isin(flags, (-1, 0, 1)).all():
@@ -745,6 +775,12 @@ def main(argv=None) -> list[dict]:
         "(the last by id); the fixed test meshes are left out: for choosing a design",
     )
     p.add_argument(
+        "--topology-shift",
+        action="store_true",
+        help="test on the meshes that are not topological spheres, in the classes that have spheres; "
+        "train on every other mesh",
+    )
+    p.add_argument(
         "--average",
         type=int,
         default=AVERAGE_EPOCHS,
@@ -912,8 +948,8 @@ def main(argv=None) -> list[dict]:
         p.error("--weight-decay must be 0 (off) or a finite positive number")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
-    if sum(map(bool, (a.folds, a.split, a.validation))) > 1:
-        p.error("--folds, --split and --validation exclude each other")
+    if sum(map(bool, (a.folds, a.split, a.validation, a.topology_shift))) > 1:
+        p.error("--folds, --split, --validation and --topology-shift exclude each other")
     only_folds = None
     if a.only_folds is not None:
         try:
@@ -974,7 +1010,7 @@ def main(argv=None) -> list[dict]:
         done = "all from the cache"
     print(f"operators: {len(batches)} meshes, {done}", flush=True)
     results = []
-    evaluations = splits(dataset, a.folds, a.split, a.validation, a.partition)
+    evaluations = splits(dataset, a.folds, a.split, a.validation, a.partition, a.topology_shift)
     if only_folds is not None:
         evaluations = [evaluations[k] for k in sorted(only_folds)]
     trained = np.any([m for _, m, _ in evaluations], axis=0)

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import torch
+import trimesh
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_learning.py"
 
@@ -85,10 +86,45 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         assert (train | test)[tr].all()
 
 
+def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack(bench):
+    """Spheres train; a torus tests where its class has spheres; a class without spheres
+    trains whole."""
+    sphere = trimesh.creation.icosphere(1)
+    torus = trimesh.creation.torus(1.0, 0.3, major_sections=12, minor_sections=6)
+    meshes, labels = [], []
+    for label, shapes in enumerate([[sphere, sphere, torus], [torus, torus], [sphere, torus, sphere]]):
+        for m in shapes:
+            meshes.append((np.asarray(m.vertices), np.asarray(m.faces)))
+            labels.append(label)
+    dataset = {"meshes": meshes, "labels": np.array(labels), "split": np.zeros(len(labels), int)}
+    flags = bench.topology_shift_flags(dataset)
+    np.testing.assert_array_equal(flags, [0, 0, 1, 0, 0, 0, 1, 0])
+    ((name, train, test),) = bench.splits(dataset, 0, None, topology_shift=True)
+    assert name == "topology"
+    np.testing.assert_array_equal(test, flags == 1)
+    np.testing.assert_array_equal(train, flags == 0)
+
+
+def test_topology_shift_of_the_psb_file(bench, psb):
+    """On PSB: 39 test meshes in 9 classes (16 cups with a handle, 12 vases, the 3 bearings
+    with holes, ...), each of a topology no training mesh of its class has."""
+    dataset = bench.load_psb(psb)
+    flags = bench.topology_shift_flags(dataset)
+    labels = dataset["labels"]
+    euler = np.array([len(v) - 3 * len(f) // 2 + len(f) for v, f in dataset["meshes"]])  # closed meshes
+    assert flags.sum() == 39 and len(set(labels[flags == 1])) == 9
+    for i in np.flatnonzero(flags):
+        assert euler[i] not in euler[(labels == labels[i]) & (flags == 0)]
+    classes = np.array(dataset["classes"])
+    assert (classes[labels[flags == 1]] == "cup").sum() == 16
+    assert sorted(euler[(classes[labels] == "bearing") & (flags == 1)]) == [-10, -6, -6]
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
         (["--models", "resnet"], "unknown models"),
+        (["--validation", "--topology-shift"], "exclude each other"),
         (["--folds", "1"], "--folds"),
         (["--only-folds", "0"], "--only-folds needs --folds"),
         (["--folds", "5", "--only-folds", "5"], "0..K-1"),
@@ -404,12 +440,13 @@ def test_readme_holm_adjusted_p_values_are_those_of_the_saved_runs(bench):
 #: the phrase filled with the accuracy of its runs on seeds 0-2, over every fold for "folds"
 README_SUMMARY = [
     (
-        "`EdgeFieldNet` classifies **{}**, the faithful DiffusionNet {} with its own recipe and {} trained alike",
+        "`EdgeFieldNet` classifies **{}**, the faithful DiffusionNet {} with its own recipe and {} "
+        "trained alike",
         [(RERUN, "folds"), ("diffusionnet-nodropout", "folds"), (_ALIKE, "folds")],
     ),
     (
-        "vector stream the same network classifies {} of those meshes; with DiffusionNet's vertex gradients in "
-        "place of the edge operators {}, and with the diffusion times frozen {}.",
+        "vector stream the same network classifies {} of those meshes; with DiffusionNet's vertex "
+        "gradients in place of the edge operators {}, and with the diffusion times frozen {}.",
         [(a, "folds") for a in _ABLATIONS],
     ),
     (
