@@ -922,6 +922,50 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         assert {f"{r['parameters']:,}" for r in mine} == {parameters}, name
 
 
+def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
+    """The README's count of the fixed split's bearings with holes that each network
+    classifies, over every saved run that recorded each mesh's class (the runs file and the
+    re-runs of ``bench_learning_fixed_meshes.json``), averaged weights."""
+    root = BENCH.parents[1]
+    results = root / "benchmarks/results"
+    runs = json.loads((results / "bench_learning_runs.json").read_text())
+    reruns = json.loads((results / "bench_learning_fixed_meshes.json").read_text())
+    dataset = bench.load_psb(psb)
+    labels, classes = dataset["labels"], np.array(dataset["classes"])
+    euler = np.array([len(v) - len(f) // 2 for v, f in dataset["meshes"]])  # closed: V - 3F/2 + F
+    holes = [
+        i for i in np.flatnonzero(dataset["split"] == 1) if classes[labels[i]] == "bearing" and euler[i] != 2
+    ]
+    assert (
+        len(holes) == 3
+        and not ((classes[labels] == "bearing") & (euler != 2) & (dataset["split"] == 0)).any()
+    )
+
+    def count(model, rs, meshes):  # (right, pairs) of the model's fixed-split runs on these meshes
+        right = pairs = 0
+        for r in rs:
+            if r["model"] == model and r["split"] == "fixed" and "averaged_test_predictions" in r:
+                for m, p in zip(r["test_meshes"], r["averaged_test_predictions"]):
+                    if m in meshes:
+                        right, pairs = right + int(p == labels[m]), pairs + 1
+        return right, pairs
+
+    full, scalar = (
+        count("edgefieldnet", runs + reruns, holes),
+        count("edgefieldnet-scalar", runs + reruns, holes),
+    )
+    others = [i for i in np.flatnonzero(dataset["split"] == 1) if i not in holes]
+    level = count("edgefieldnet", reruns, others), count("edgefieldnet-scalar", reruns, others)
+    assert level[0] == level[1]
+    readme = " ".join((root / "README.md").read_text().split())
+    phrase = (
+        f"the full network classifies {full[0]} of their {full[1]} (mesh, run) pairs (with or without the "
+        f"curvature input), the network without the vector stream {scalar[0]} of {scalar[1]}; on the other "
+        f"{len(others)} test meshes the two are level ({level[0][0]} of {level[0][1]} each)."
+    )
+    assert phrase in readme
+
+
 def test_readme_curvature_input_costs_no_time():
     """The README's rows with the mean curvature input take the time of their network on
     the HKS alone, as it says: in the saved measurement, alternated with the HKS input,
