@@ -628,7 +628,8 @@ def _base(names) -> str:
 
 def table(results: list[dict], models_run=None) -> str:
     """Markdown: per model, test accuracy on the fixed split (over seeds), over the folds,
-    and on other splits (``--validation``, ``--split``) where there are any; time; parameters.
+    and on other splits (``--validation``, ``--split``, ``--topology-shift``) where there are
+    any; time (as a ratio to ``diffusionnet``'s step, "-" without its runs); parameters.
     One row per name in ``models_run`` (default: every :func:`label` of ``results``, in order).
 
     The cross-validation cell is over the folds of partition 0 (the default of
@@ -667,14 +668,10 @@ def table(results: list[dict], models_run=None) -> str:
             for part, xs in sorted(cv.items())  # partitions are seeds, 0 or more: 0 first
         )
         rest = [r["test_accuracy"] for r in rs if own(r["split"])]
-        ratio = (
-            (statistics.mean(r["seconds_per_step"] for r in rs) / statistics.mean(base))
-            if base
-            else float("nan")
-        )
+        ratio = statistics.mean(r["seconds_per_step"] for r in rs) / statistics.mean(base) if base else None
         seconds = statistics.mean(r["train_seconds"] for r in rs)
         cells = [name, stat(fixed), cv_cell or "-"] + ([stat(rest)] if other else [])
-        cells += [f"{seconds:.0f}", f"{ratio:.2f}", f"{rs[0]['parameters']:,}"]
+        cells += [f"{seconds:.0f}", "-" if ratio is None else f"{ratio:.2f}", f"{rs[0]['parameters']:,}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

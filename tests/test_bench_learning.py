@@ -259,6 +259,15 @@ def test_table_keeps_fixed_folds_and_validation_apart(bench):
     )
 
 
+def test_table_time_is_a_dash_without_diffusionnet_runs(bench):
+    run = dict(model="edgefieldnet", seed=0, split="topology", test_accuracy=0.5, train_accuracy=1.0)
+    run.update(train_seconds=10.0, seconds_per_step=0.02, parameters=1000)
+    row = bench.table([run]).splitlines()[-1]
+    assert "nan" not in row and row.split("|")[-3].strip() == "-"
+    with_base = bench.table([run, dict(run, model="diffusionnet", seconds_per_step=0.04)]).splitlines()
+    assert with_base[2].split("|")[-3].strip() == "0.50"
+
+
 def test_table_partitions_keeps_the_folds_of_the_partitions_asked_for(bench, tmp_path, capsys):
     """``--table RUNS --partitions 0`` leaves out the fold runs of other partitions (and
     keeps every other split), so each partition's comparison can be printed alone."""
