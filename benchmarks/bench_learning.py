@@ -105,6 +105,7 @@ MODELS = {
     "edgefieldnet-meanpool": _model(models.EdgeFieldNet, logs=True, pool="mean"),
     # the fields' high frequencies (what the L_c diffusion removes) added back, learned
     "edgefieldnet-highpass": _model(models.EdgeFieldNet, logs=True, high_pass=True),
+    "edgefieldnet-nodiv": _model(models.EdgeFieldNet, logs=True, divergence=False),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
     "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
     "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),

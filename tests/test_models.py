@@ -148,19 +148,23 @@ def _block_on_the_edges(block, x, z, batch, keep=None):
     )
     inv = torch.tanh((ud * L.complex_linear(ud, block.products).conj()).real)
     inv = L.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
-    dc = L.divergence_features(ud, batch.gradient, batch.vertex_mass)
-    feats = [x, xd, inv, torch.tanh(dc.real), torch.tanh(dc.imag)]
+    feats = [x, xd, inv]
+    if block.divergence:
+        dc = L.divergence_features(ud, batch.gradient, batch.vertex_mass)
+        feats += [torch.tanh(dc.real), torch.tanh(dc.imag)]
     return x + block.mlp(torch.cat(feats, dim=1)), ud if z is None else z + ud
 
 
-@pytest.mark.parametrize("keep", [None, [True, False]])
-def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh, keep):
+@pytest.mark.parametrize("keep, divergence", [(None, True), ([True, False], True), (None, False)])
+def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh, keep, divergence):
     """The block works on the fields' coefficients in the edge eigenbasis: the same numbers
     as every field on the edges, on a batch of two meshes, with and without a mesh whose
-    vector stream is dropped, for the scalars, the fields and the gradients."""
+    vector stream is dropped, and without the divergence and curl features, for the
+    scalars, the fields and the gradients."""
     pair = batching.collate_meshes([_sample(*mesh), _sample(*perturbed_icosphere(1, 0.05, seed=7))])
     torch.manual_seed(0)
-    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0).double()
+    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, divergence=divergence).double()
+    assert block.mlp[0].in_features == 2 * 8 + (3 if divergence else 1) * 4
     with torch.no_grad():
         block.diffusion.raw_times.uniform_(0.0, 0.05)
         block.field_diffusion.raw_times.uniform_(0.01, 0.2)
@@ -324,6 +328,17 @@ def test_field_readout_options_are_checked():
         models.EdgeFieldNet(8, 5, vector="none", readout_fields=True)
     with pytest.raises(ValueError, match="readout_fields must be True or False"):
         models.EdgeFieldNet(8, 5, readout_fields=1)
+
+
+def test_divergence_option_is_checked_and_reaches_every_block(mesh):
+    with pytest.raises(ValueError, match="divergence=False needs vector='edge'"):
+        models.EdgeFieldNet(8, 5, vector="vertex", divergence=False)
+    with pytest.raises(ValueError, match="divergence must be True or False"):
+        models.EdgeFieldNet(8, 5, divergence=0)
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, mlp=(8,), divergence=False).double().eval()
+    assert all(b.mlp[0].in_features == 2 * 8 + 4 for b in net.blocks)
+    with torch.no_grad():
+        assert torch.isfinite(net(_batch(*mesh))).all()
 
 
 def test_stream_dropout_needs_a_vector_stream():

@@ -372,6 +372,10 @@ class EdgeFieldBlock(nn.Module):
     vector_dropout : float
         Dropout on the vector stream's features where they enter the per-vertex MLP
         (pooled invariants, divergence and curl); ``0`` (default) draws no random numbers.
+    divergence : bool
+        With ``vector="edge"``: give the MLP the divergence and curl of the fields
+        (``-M_v^{-1} G^* u``, default) beside their pooled invariants; ``False`` leaves them
+        out (an ablation of the adjoint's way back to the scalars).
 
     Forward
     -------
@@ -392,11 +396,16 @@ class EdgeFieldBlock(nn.Module):
         carry: bool = True,
         high_pass: bool = False,
         vector_dropout: float = 0.0,
+        divergence: bool = True,
     ):
         super().__init__()
         if vector not in _VECTOR:
             raise ValueError(f"vector must be one of {_VECTOR}, got {vector!r}")
-        self.vector, self.vector_width = vector, vector_width
+        if not isinstance(divergence, bool):
+            raise ValueError(f"divergence must be True or False, got {divergence!r}")
+        if not divergence and vector != "edge":
+            raise ValueError(f"divergence=False needs vector='edge'; vector={vector!r} has no divergence")
+        self.vector, self.vector_width, self.divergence = vector, vector_width, divergence
         self.diffusion = LearnedDiffusion(width, positivity="clamp", init_times=0.0)
         self.diffusion.raw_times.requires_grad_(learn_times)
         extra = 0
@@ -410,7 +419,7 @@ class EdgeFieldBlock(nn.Module):
         if vector == "edge":
             self.field_diffusion = LearnedDiffusion(vector_width, positivity="clamp", init_times=0.0)
             self.field_diffusion.raw_times.requires_grad_(learn_times)
-            extra += 2 * vector_width
+            extra += 2 * vector_width if divergence else 0
         self.vector_features = extra  # channels the vector stream gives the MLP
         self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
         # zeros: no random numbers drawn, so a seed initialises the rest as without it
@@ -460,7 +469,7 @@ class EdgeFieldBlock(nn.Module):
                     ud = ud + complex_linear(u - ud, self.high_pass)
                 u = ud
             vec = [_vertex_invariants(u, self.products, batch, self.vector)]
-            if self.vector == "edge":
+            if self.vector == "edge" and self.divergence:
                 dc = divergence_features(u, batch.gradient, batch.vertex_mass)
                 vec += [torch.tanh(dc.real), torch.tanh(dc.imag)]
             feats += self._dropped(vec)
@@ -509,9 +518,11 @@ class EdgeFieldBlock(nn.Module):
         t = self.field_diffusion.times.to(new.real.dtype)
         new = new * torch.exp(-batch.edge_evals.to(t.dtype)[:, :, None] * t)
         u = _synthesize(new, batch)
-        dc = -_per_mesh(basis, new, meshes)
-        dc = dc * batch.vertex_mass.to(dc.real.dtype).reciprocal()[:, None]
-        vec = [_vertex_invariants(u, self.products, batch, "edge"), torch.tanh(dc.real), torch.tanh(dc.imag)]
+        vec = [_vertex_invariants(u, self.products, batch, "edge")]
+        if self.divergence:
+            dc = -_per_mesh(basis, new, meshes)
+            dc = dc * batch.vertex_mass.to(dc.real.dtype).reciprocal()[:, None]
+            vec += [torch.tanh(dc.real), torch.tanh(dc.imag)]
         feats += self._dropped(vec)
         return x + self.mlp(torch.cat(feats, dim=1)), new, u
 
@@ -539,6 +550,7 @@ class EdgeFieldNet(nn.Module):
     vector : {"edge", "vertex", "none"}, see :class:`EdgeFieldBlock`
     learn_times : bool
     high_pass : bool, see :class:`EdgeFieldBlock`
+    divergence : bool, see :class:`EdgeFieldBlock`
     vector_dropout : float, see :class:`EdgeFieldBlock`
     head_dropout : float
         Dropout on what the output layer takes (the pooled mean and deviation with
@@ -603,6 +615,7 @@ class EdgeFieldNet(nn.Module):
         readout_fields: bool = False,
         spectrum: int = 0,
         spectrum_of: str = "connection",
+        divergence: bool = True,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
@@ -634,6 +647,7 @@ class EdgeFieldNet(nn.Module):
                 carry=i > 0,
                 high_pass=high_pass,
                 vector_dropout=vector_dropout,
+                divergence=divergence,
             )
             for i in range(num_blocks)
         )
