@@ -975,6 +975,45 @@ def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
     assert phrase in readme
 
 
+def test_readme_topology_shift_is_that_of_the_saved_runs(bench, psb):
+    """The README's counts on the split across topology: test meshes classified over seeds
+    0-2 with the averaged weights, in all and among the cups, for each network."""
+    root = BENCH.parents[1]
+    runs = json.loads((root / "benchmarks/results/bench_learning_topology_runs.json").read_text())
+    dataset = bench.load_psb(psb)
+    labels, classes = dataset["labels"], np.array(dataset["classes"])
+    flags = bench.topology_shift_flags(dataset)
+
+    def counts(model):  # (right in all, right among the cups), over seeds 0-2
+        mine = [r for r in runs if r["model"] == model and r["seed"] in (0, 1, 2)]
+        assert sorted(r["seed"] for r in mine) == [0, 1, 2] and all(r["split"] == "topology" for r in mine)
+        right = cups = 0
+        for r in mine:
+            assert sorted(r["test_meshes"]) == np.flatnonzero(flags).tolist()
+            for m, p in zip(r["test_meshes"], r["averaged_test_predictions"]):
+                right += int(p == labels[m])
+                cups += int(p == labels[m] and classes[labels[m]] == "cup")
+        return right, cups
+
+    (e, ec), (s, sc), (v, vc), (d, dc) = map(
+        counts, ["edgefieldnet", "edgefieldnet-scalar", "edgefieldnet-vertexvec", "diffusionnet-nodropout"]
+    )
+    readme = " ".join((root / "README.md").read_text().split())
+    phrase = (
+        f"the edge-field network classifies {e} of 117 (seeds 0-2), the same network without its vector "
+        f"stream {s}, with vertex gradients {v} and DiffusionNet trained alike {d}; among the 48 cups, "
+        f"{ec} against {sc}, {vc} and {dc}."
+    )
+    assert phrase in readme, phrase
+    docs = " ".join((root / "docs/learning.md").read_text().split())
+    phrase = (
+        f"`EdgeFieldNet` classifies {e} of the 117 (mesh, seed) pairs, the same network without its vector "
+        f'stream (`vector="none"`) {s}, with DiffusionNet\'s vertex gradients in place of the edge fields '
+        f'(`vector="vertex"`) {v}, and DiffusionNet {d};'
+    )
+    assert phrase in docs, phrase
+
+
 def test_readme_curvature_input_costs_no_time():
     """The README's rows with the mean curvature input take the time of their network on
     the HKS alone, as it says: in the saved measurement, alternated with the HKS input,
