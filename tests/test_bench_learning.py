@@ -998,20 +998,16 @@ def test_readme_topology_shift_is_that_of_the_saved_runs(bench, psb):
     (e, ec), (s, sc), (v, vc), (d, dc) = map(
         counts, ["edgefieldnet", "edgefieldnet-scalar", "edgefieldnet-vertexvec", "diffusionnet-nodropout"]
     )
-    readme = " ".join((root / "README.md").read_text().split())
-    phrase = (
-        f"the edge-field network classifies {e} of 117 (seeds 0-2), the same network without its vector "
-        f"stream {s}, with vertex gradients {v} and DiffusionNet trained alike {d}; among the 48 cups, "
-        f"{ec} against {sc}, {vc} and {dc}."
-    )
-    assert phrase in readme, phrase
-    docs = " ".join((root / "docs/learning.md").read_text().split())
-    phrase = (
-        f"`EdgeFieldNet` classifies {e} of the 117 (mesh, seed) pairs, the same network without its vector "
-        f'stream (`vector="none"`) {s}, with DiffusionNet\'s vertex gradients in place of the edge fields '
-        f'(`vector="vertex"`) {v}, and DiffusionNet {d};'
-    )
-    assert phrase in docs, phrase
+    phrases = {
+        "README.md": f"the edge-field network classifies {e} of 117 (seeds 0-2), the same network without "
+        f"its vector stream {s}, with vertex gradients {v} and DiffusionNet trained alike {d}; among the 48 "
+        f"cups, {ec} against {sc}, {vc} and {dc}.",
+        "docs/learning.md": f"`EdgeFieldNet` classifies {e} of the 117 (mesh, seed) pairs, the same network "
+        f'without its vector stream (`vector="none"`) {s}, with DiffusionNet\'s vertex gradients in place of '
+        f'the edge fields (`vector="vertex"`) {v}, and DiffusionNet {d};',
+    }
+    for path, phrase in phrases.items():
+        assert phrase in " ".join((root / path).read_text().split()), (path, phrase)
 
 
 def test_readme_curvature_input_costs_no_time():
