@@ -165,7 +165,9 @@ def operator_options(vertex_laplacian: str = "cotan", k_edge: int = K_EDGE) -> d
 
 
 def load_psb(path) -> dict:
-    d = np.load(path, allow_pickle=False)
+    # every array read once: an NpzFile decompresses an array again on each access
+    with np.load(path, allow_pickle=False) as data:
+        d = {name: data[name] for name in data.files}
     meshes = []
     for i in range(len(d["labels"])):
         v, f = psb_mesh(d, i)
@@ -175,7 +177,7 @@ def load_psb(path) -> dict:
         "labels": d["labels"].astype(np.int64),
         "split": d["split"].astype(np.int64),
         "classes": [str(c) for c in d["classes"]],
-        "ids": d["psb_ids"].astype(np.int64) if "psb_ids" in d.files else np.arange(len(d["labels"])),
+        "ids": d["psb_ids"].astype(np.int64) if "psb_ids" in d else np.arange(len(d["labels"])),
     }
 
 

@@ -53,7 +53,10 @@ def psb_path(path=None) -> Path:
 
 def psb_mesh(arrays, i: int) -> tuple[np.ndarray, np.ndarray]:
     """Mesh ``i`` of the arrays of ``psb_watertight_2k.npz``: its vertices as stored
-    (float32) and its faces as int64, both ``(N, 3)``."""
+    (float32) and its faces as int64, both ``(N, 3)``.
+
+    ``arrays`` maps names to arrays; read an ``np.load`` file into a dict first when taking
+    many meshes, since an ``NpzFile`` decompresses an array again on every access."""
     vo, fo = arrays["vert_offsets"], arrays["face_offsets"]
     return arrays["verts"][vo[i] : vo[i + 1]], arrays["faces"][fo[i] : fo[i + 1]].astype(np.int64)
 
