@@ -105,13 +105,18 @@ def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack(
     np.testing.assert_array_equal(train, flags == 0)
 
 
+def _euler_of_closed(dataset) -> np.ndarray:
+    """The Euler characteristic of each closed mesh of ``dataset``: V - E + F with E = 3F/2."""
+    return np.array([len(v) - len(f) // 2 for v, f in dataset["meshes"]])
+
+
 def test_topology_shift_of_the_psb_file(bench, psb):
     """On PSB: 39 test meshes in 9 classes (16 cups with a handle, 12 vases, the 3 bearings
     with holes, ...), each of a topology no training mesh of its class has."""
     dataset = bench.load_psb(psb)
     flags = bench.topology_shift_flags(dataset)
     labels = dataset["labels"]
-    euler = np.array([len(v) - 3 * len(f) // 2 + len(f) for v, f in dataset["meshes"]])  # closed meshes
+    euler = _euler_of_closed(dataset)
     assert flags.sum() == 39 and len(set(labels[flags == 1])) == 9
     for i in np.flatnonzero(flags):
         assert euler[i] not in euler[(labels == labels[i]) & (flags == 0)]
@@ -941,7 +946,7 @@ def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
     reruns = json.loads((results / "bench_learning_fixed_meshes.json").read_text())
     dataset = bench.load_psb(psb)
     labels, classes = dataset["labels"], np.array(dataset["classes"])
-    euler = np.array([len(v) - len(f) // 2 for v, f in dataset["meshes"]])  # closed: V - 3F/2 + F
+    euler = _euler_of_closed(dataset)
     holes = [
         i for i in np.flatnonzero(dataset["split"] == 1) if classes[labels[i]] == "bearing" and euler[i] != 2
     ]
