@@ -516,7 +516,8 @@ def test_edge_field_net_learns_generated_shapes():
 
 @pytest.mark.slow
 def test_edge_field_net_learns_psb_classes():
-    d = np.load(psb_file())
+    with np.load(psb_file()) as data:  # each array read once, not once per mesh
+        d = {name: data[name] for name in data.files}
     classes = [0, 3, 7, 12]  # human, airplane, table, bird
     train, test = [], []
     for label, c in enumerate(classes):
