@@ -42,7 +42,9 @@ README for how to build it); operators are cached on disk in ``--cache`` (defaul
 ``--validation`` trains on 12 of the 16 training meshes of each class and tests on the
 other 4, leaving the test meshes out, for choosing a design without them.
 ``--topology-shift`` tests on the meshes that are not topological spheres in the classes
-that have spheres, and trains on every other mesh (see :func:`topology_shift_flags`).
+that have spheres, and trains on every other mesh (see :func:`topology_shift_flags`);
+with ``--validation`` it does so within the fixed split's training meshes, leaving the
+test meshes out: a split across topology for choosing a design.
 
 ``--vertex-laplacian`` chooses the vertex Laplacian of every model (its eigenbasis gives
 the input signatures and the vertex diffusion): ``cotan`` (default) or ``robust``, the
@@ -106,6 +108,8 @@ MODELS = {
     # the fields' high frequencies (what the L_c diffusion removes) added back, learned
     "edgefieldnet-highpass": _model(models.EdgeFieldNet, logs=True, high_pass=True),
     "edgefieldnet-nodiv": _model(models.EdgeFieldNet, logs=True, divergence=False),
+    # the fields not diffused: the gradients on the edges as they are, every feature local
+    "edgefieldnet-local": _model(models.EdgeFieldNet, logs=True, field_diffusion=False),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
     "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
     "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),
@@ -294,20 +298,26 @@ def validation_flags(dataset: dict, per_class: int = 4) -> np.ndarray:
     return flags
 
 
-def topology_shift_flags(dataset: dict) -> np.ndarray:
-    """A split across topology: 0 train, 1 test.
+def topology_shift_flags(dataset: dict, validation: bool = False) -> np.ndarray:
+    """A split across topology: -1 left out, 0 train, 1 test.
 
     The test meshes are those that are not topological spheres (Euler characteristic other
     than 2) in a class that has spheres; every other mesh trains. Each test mesh so has a
     topology that no training mesh of its class has (a cup with a handle, where the
     training cups have none), while a class without spheres trains whole.
+
+    With ``validation``, the same within the fixed split's training meshes: its test
+    meshes are left out (-1), so that a design can be chosen across topology without them.
     """
     labels = np.asarray(dataset["labels"])
     euler = np.array(
         [Topology(torch.as_tensor(f), len(v)).euler_characteristic for v, f in dataset["meshes"]]
     )
     has_spheres = np.isin(labels, labels[euler == 2])
-    return ((euler != 2) & has_spheres).astype(np.int64)
+    flags = ((euler != 2) & has_spheres).astype(np.int64)
+    if validation:
+        flags[np.asarray(dataset["split"]) == 1] = -1
+    return flags
 
 
 def splits(
@@ -335,12 +345,12 @@ def splits(
             idx = rng.permutation(np.flatnonzero(dataset["labels"] == c))
             fold[idx] = np.arange(len(idx)) % folds
         return [(f"fold{k}", fold != k, fold == k) for k in range(folds)]
+    if topology_shift:
+        flags = topology_shift_flags(dataset, validation)
+        return [("topology validation" if validation else "topology", flags == 0, flags == 1)]
     if validation:
         flags = validation_flags(dataset)
         return [("validation", flags == 0, flags == 1)]
-    if topology_shift:
-        flags = topology_shift_flags(dataset)
-        return [("topology", flags == 0, flags == 1)]
     if split_file:
         flags = np.load(split_file)
         if flags.shape != (n,) or not np.isin(flags, (-1, 0, 1)).all():
@@ -778,7 +788,7 @@ def main(argv=None) -> list[dict]:
         "--topology-shift",
         action="store_true",
         help="test on the meshes that are not topological spheres, in the classes that have spheres; "
-        "train on every other mesh",
+        "train on every other mesh (with --validation: within the fixed split's training meshes)",
     )
     p.add_argument(
         "--average",
@@ -948,8 +958,8 @@ def main(argv=None) -> list[dict]:
         p.error("--weight-decay must be 0 (off) or a finite positive number")
     if a.folds == 1 or a.folds < 0:
         p.error("--folds must be 0 (off) or at least 2")
-    if sum(map(bool, (a.folds, a.split, a.validation, a.topology_shift))) > 1:
-        p.error("--folds, --split, --validation and --topology-shift exclude each other")
+    if sum(map(bool, (a.folds, a.split, a.validation or a.topology_shift))) > 1:
+        p.error("--folds, --split and --validation or --topology-shift exclude each other")
     only_folds = None
     if a.only_folds is not None:
         try:

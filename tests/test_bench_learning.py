@@ -103,6 +103,14 @@ def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack(
     assert name == "topology"
     np.testing.assert_array_equal(test, flags == 1)
     np.testing.assert_array_equal(train, flags == 0)
+    # within the fixed split's training meshes: its test meshes are left out
+    dataset["split"] = np.array([0, 1, 0, 0, 0, 1, 0, 1])
+    flags = bench.topology_shift_flags(dataset, validation=True)
+    np.testing.assert_array_equal(flags, [0, -1, 1, 0, 0, -1, 1, -1])
+    ((name, train, test),) = bench.splits(dataset, 0, None, validation=True, topology_shift=True)
+    assert name == "topology validation"
+    np.testing.assert_array_equal(test, flags == 1)
+    np.testing.assert_array_equal(train, flags == 0)
 
 
 def _euler_of_closed(dataset) -> np.ndarray:
@@ -123,13 +131,18 @@ def test_topology_shift_of_the_psb_file(bench, psb):
     classes = np.array(dataset["classes"])
     assert (classes[labels[flags == 1]] == "cup").sum() == 16
     assert sorted(euler[(classes[labels] == "bearing") & (flags == 1)]) == [-10, -6, -6]
+    # for choosing a design: 31 of them are fixed-split training meshes, none of the bearings
+    within = bench.topology_shift_flags(dataset, validation=True)
+    assert (within == 1).sum() == 31 and (within == 0).sum() == 304 - 31
+    assert not (within[dataset["split"] == 1] + 1).any()
+    assert "bearing" not in classes[labels[within == 1]]
 
 
 @pytest.mark.parametrize(
     "argv, message",
     [
         (["--models", "resnet"], "unknown models"),
-        (["--validation", "--topology-shift"], "exclude each other"),
+        (["--split", "s.npy", "--topology-shift"], "exclude each other"),
         (["--folds", "1"], "--folds"),
         (["--only-folds", "0"], "--only-folds needs --folds"),
         (["--folds", "5", "--only-folds", "5"], "0..K-1"),

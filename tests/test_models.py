@@ -5,6 +5,8 @@ new block in float64, dtype agreement at the first call, and learning: accuracy 
 above chance on generated shapes (and on a few PSB classes, slow lane).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -47,6 +49,17 @@ NETWORKS = {
     ),
     "edge-highpass": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, high_pass=True
+    ),
+    "edge-local": lambda head: models.EdgeFieldNet(
+        8,
+        5,
+        width=8,
+        vector_width=4,
+        num_blocks=2,
+        mlp=(8,),
+        head=head,
+        log_features=True,
+        field_diffusion=False,
     ),
     "edge-dropout": lambda head: models.EdgeFieldNet(
         8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector_dropout=0.5, head_dropout=0.5
@@ -95,6 +108,18 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
         b = b[inverse]
     assert a.abs().max() > 1e-3  # not a trivial output
     torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)
+
+
+def test_edge_field_block_without_field_diffusion_gradcheck():
+    v, f = perturbed_icosphere(1, 0.08, seed=4)
+    batch = _batch(v, f)
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, field_diffusion=False).double()
+    x = torch.randn(batch.num_vertices, 3, dtype=torch.float64, requires_grad=True)
+    z = torch.randn(batch.num_edges, 2, dtype=torch.complex128, requires_grad=True)
+    assert torch.autograd.gradcheck(
+        lambda x, z: (block(x, z, batch)[0], torch.view_as_real(block(x, z, batch)[1])), (x, z)
+    )
 
 
 @pytest.mark.parametrize("high_pass", [False, True])
@@ -328,6 +353,55 @@ def test_field_readout_options_are_checked():
         models.EdgeFieldNet(8, 5, vector="none", readout_fields=True)
     with pytest.raises(ValueError, match="readout_fields must be True or False"):
         models.EdgeFieldNet(8, 5, readout_fields=1)
+
+
+def _local_block_on_the_edges(block, x, z, batch):
+    """The block with ``field_diffusion=False`` as its formula reads: the gradients of the
+    lifted scalars plus the carried fields, neither diffused nor projected."""
+    xd = models._diffuse_vertices(block.diffusion, x, batch)
+    a = torch.view_as_complex(block.lift(xd).unflatten(1, (block.vector_width, 2)).contiguous())
+    u = torch.linalg.solve(torch.diag(batch.edge_mass).to(a.dtype), batch.gradient.to_dense().to(a.dtype) @ a)
+    u = u + block.mix(z)
+    inv = torch.tanh((u * models.complex_linear(u, block.products).conj()).real)
+    inv = models.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    dc = -(batch.gradient.to_dense().to(u.dtype).mH @ u) / batch.vertex_mass[:, None]
+    feats = [x, xd, inv, torch.tanh(dc.real), torch.tanh(dc.imag)]
+    return x + block.mlp(torch.cat(feats, dim=1)), z + u
+
+
+def test_fields_not_diffused_are_the_gradients_on_the_edges(mesh):
+    """``field_diffusion=False``: the block's fields are ``M_z^{-1} G a`` plus the carried
+    fields, and its divergence and curl those of these fields, by dense algebra; the
+    network needs no eigenpair of ``L_c``."""
+    batch = _batch(*mesh)
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, field_diffusion=False).double()
+    assert block.field_diffusion is None and not block.spectral
+    with torch.no_grad():
+        block.diffusion.raw_times.uniform_(0.0, 0.05)
+    x = torch.randn(batch.num_vertices, 8, dtype=torch.float64)
+    z = torch.randn(batch.num_edges, 4, dtype=torch.complex128)
+    got, want = block(x, z, batch), _local_block_on_the_edges(block, x, z, batch)
+    for g, w in zip(got, want):
+        torch.testing.assert_close(g, w, rtol=1e-10, atol=1e-12)
+    # not the diffused block: the eigenbasis holds only the lowest modes
+    torch.manual_seed(0)
+    diffused = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0).double()
+    diffused.load_state_dict(block.state_dict(), strict=False)
+    assert (diffused(x, z, batch)[1] - got[1]).abs().max() > 1e-2
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, mlp=(8,), field_diffusion=False).double().eval()
+    without = dataclasses.replace(batch, edge_evals=None, edge_evecs=None)
+    with torch.no_grad():
+        torch.testing.assert_close(net(without), net(batch))
+
+
+def test_field_diffusion_option_is_checked():
+    with pytest.raises(ValueError, match="field_diffusion=False needs vector='edge'"):
+        models.EdgeFieldNet(8, 5, vector="vertex", field_diffusion=False)
+    with pytest.raises(ValueError, match="field_diffusion must be True or False"):
+        models.EdgeFieldNet(8, 5, field_diffusion="no")
+    with pytest.raises(ValueError, match="high_pass=True needs field_diffusion=True"):
+        models.EdgeFieldNet(8, 5, field_diffusion=False, high_pass=True)
 
 
 def test_divergence_option_is_checked_and_reaches_every_block(mesh):

@@ -99,6 +99,17 @@ def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean
         )
 
 
+def _check_edge_options(vector: str, **options: bool) -> None:
+    """Each option a bool, and ``False`` (a change to the edge-based vector stream) only with ``vector="edge"``."""
+    for name, value in options.items():
+        if not isinstance(value, bool):
+            raise ValueError(f"{name} must be True or False, got {value!r}")
+        if not value and vector != "edge":
+            raise ValueError(
+                f"{name}=False needs vector='edge'; vector={vector!r} has no {name.replace('_', ' ')}"
+            )
+
+
 def _check_dropout(**probabilities) -> None:
     for name, p in probabilities.items():
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p < 1:
@@ -376,6 +387,13 @@ class EdgeFieldBlock(nn.Module):
         With ``vector="edge"``: give the MLP the divergence and curl of the fields
         (``-M_v^{-1} G^* u``, default) beside their pooled invariants; ``False`` leaves them
         out (an ablation of the adjoint's way back to the scalars).
+    field_diffusion : bool
+        With ``vector="edge"``: diffuse the fields with ``L_c`` in its truncated eigenbasis
+        (default). ``False``: the block's fields are the gradients ``M_z^{-1} G a`` (plus
+        the carried fields) on the edges as they are, not diffused: every feature of the
+        vector stream is then local (the divergence and curl of ``G a`` are Laplacians of
+        ``a``), where the eigenbasis holds only the lowest modes of ``L_c``, whose shape
+        depends on the surface's topology. No eigenpair of ``L_c`` is needed.
 
     Forward
     -------
@@ -397,14 +415,16 @@ class EdgeFieldBlock(nn.Module):
         high_pass: bool = False,
         vector_dropout: float = 0.0,
         divergence: bool = True,
+        field_diffusion: bool = True,
     ):
         super().__init__()
         if vector not in _VECTOR:
             raise ValueError(f"vector must be one of {_VECTOR}, got {vector!r}")
-        if not isinstance(divergence, bool):
-            raise ValueError(f"divergence must be True or False, got {divergence!r}")
-        if not divergence and vector != "edge":
-            raise ValueError(f"divergence=False needs vector='edge'; vector={vector!r} has no divergence")
+        _check_edge_options(vector, divergence=divergence, field_diffusion=field_diffusion)
+        if high_pass and not field_diffusion:
+            raise ValueError(
+                "high_pass=True needs field_diffusion=True: without the diffusion nothing is dropped"
+            )
         self.vector, self.vector_width, self.divergence = vector, vector_width, divergence
         self.diffusion = LearnedDiffusion(width, positivity="clamp", init_times=0.0)
         self.diffusion.raw_times.requires_grad_(learn_times)
@@ -416,9 +436,11 @@ class EdgeFieldBlock(nn.Module):
                 torch.randn(vector_width, vector_width, 2) / (2 * vector_width) ** 0.5
             )
             extra = vector_width
-        if vector == "edge":
+        self.field_diffusion: LearnedDiffusion | None = None
+        if vector == "edge" and field_diffusion:
             self.field_diffusion = LearnedDiffusion(vector_width, positivity="clamp", init_times=0.0)
             self.field_diffusion.raw_times.requires_grad_(learn_times)
+        if vector == "edge":
             extra += 2 * vector_width if divergence else 0
         self.vector_features = extra  # channels the vector stream gives the MLP
         self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
@@ -434,7 +456,7 @@ class EdgeFieldBlock(nn.Module):
     @property
     def spectral(self) -> bool:
         """Whether the block works on the coefficients of its fields (see :meth:`forward_spectral`)."""
-        return self.vector == "edge" and self.high_pass is None
+        return self.vector == "edge" and self.high_pass is None and self.field_diffusion is not None
 
     def forward(self, x, z, batch, keep=None):
         if self.spectral:
@@ -457,7 +479,7 @@ class EdgeFieldBlock(nn.Module):
             if keep is not None and not bool(keep.all()):
                 index = batch.edge_batch if self.vector == "edge" else batch.vertex_batch
                 u = u * keep[index].to(u.real.dtype).unsqueeze(1)
-            if self.vector == "edge":
+            if self.field_diffusion is not None:
                 ud = self.field_diffusion(
                     u,
                     batch.edge_mass,
@@ -501,7 +523,7 @@ class EdgeFieldBlock(nn.Module):
         uses the vector stream).
         """
         if not self.spectral:
-            raise ValueError("forward_spectral needs vector='edge' and high_pass=False")
+            raise ValueError("forward_spectral needs vector='edge', field_diffusion=True and high_pass=False")
         xd = _diffuse_vertices(self.diffusion, x, batch)
         feats = [x, xd]
         if keep is not None and not bool(keep.any()):
@@ -515,6 +537,7 @@ class EdgeFieldBlock(nn.Module):
             new = new + self.mix(c.flatten(0, 1)).unflatten(0, c.shape[:2])
         if keep is not None and not bool(keep.all()):
             new = new * keep.to(new.real.dtype)[:, None, None]
+        assert self.field_diffusion is not None  # self.spectral
         t = self.field_diffusion.times.to(new.real.dtype)
         new = new * torch.exp(-batch.edge_evals.to(t.dtype)[:, :, None] * t)
         u = _synthesize(new, batch)
@@ -551,6 +574,8 @@ class EdgeFieldNet(nn.Module):
     learn_times : bool
     high_pass : bool, see :class:`EdgeFieldBlock`
     divergence : bool, see :class:`EdgeFieldBlock`
+    field_diffusion : bool, see :class:`EdgeFieldBlock` (``False``: no eigenpair of
+        ``L_c`` needed in the batch)
     vector_dropout : float, see :class:`EdgeFieldBlock`
     head_dropout : float
         Dropout on what the output layer takes (the pooled mean and deviation with
@@ -616,6 +641,7 @@ class EdgeFieldNet(nn.Module):
         spectrum: int = 0,
         spectrum_of: str = "connection",
         divergence: bool = True,
+        field_diffusion: bool = True,
     ):
         super().__init__()
         _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
@@ -648,6 +674,7 @@ class EdgeFieldNet(nn.Module):
                 high_pass=high_pass,
                 vector_dropout=vector_dropout,
                 divergence=divergence,
+                field_diffusion=field_diffusion,
             )
             for i in range(num_blocks)
         )
@@ -669,6 +696,8 @@ class EdgeFieldNet(nn.Module):
 
     def forward(self, batch):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
+        if self.vector == "edge" and not any(block.field_diffusion is not None for block in self.blocks):
+            needs = ("gradient",)
         _check_batch(batch, self.in_channels, needs)
         _check_dtype(self, batch)
         x, z = self.first(_inputs(self.log_features, batch)), None
