@@ -358,16 +358,29 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
 
 def test_report_paired_table_is_that_of_the_saved_runs(bench, capsys):
     """The report's fold-by-fold comparison is what ``--table ... --paired`` prints."""
-    root = BENCH.parents[1]
-    runs = root / "benchmarks/results/bench_learning_runs.json"
+    runs = ROOT / "benchmarks/results/bench_learning_runs.json"
     bench.main(["--table", str(runs), "--paired", bench.RECOMMENDED])
     printed = capsys.readouterr().out
     paired = printed[printed.index("Against ") :].strip()
-    assert paired in (root / "benchmarks/results/bench_learning.md").read_text()
+    assert paired in (ROOT / "benchmarks/results/bench_learning.md").read_text()
 
 
 #: this release's runs of the recommended recipe, the reference of the README's verdicts
 RERUN = "edgefieldnet, 4 stretched copies, coefficients, averaged last 10"
+ROOT = BENCH.parents[1]
+
+
+def _saved(name: str) -> list[dict]:
+    """The runs saved in ``benchmarks/results/NAME``."""
+    return json.loads((ROOT / "benchmarks/results" / name).read_text())
+
+
+def _joined(path: str) -> str:
+    """The text of the repository's file ``path`` with its lines joined by single spaces,
+    so that a phrase is found wherever the file breaks its lines."""
+    return " ".join((ROOT / path).read_text().split())
+
+
 _ALIKE = "diffusionnet-nodropout, 4 stretched copies, averaged last 10"
 _DROPOUT_ALIKE = "diffusionnet, 4 stretched copies, averaged last 10"
 _ABLATIONS = [
@@ -414,9 +427,8 @@ def test_readme_p_values_are_those_of_the_saved_runs(bench):
     """The p-values in the README's reading are those of ``--paired`` on the saved runs,
     against this release's runs and against the earlier ones (``bench.RECOMMENDED``), on
     partition 0's folds (``--partitions 0``) or on those of every partition."""
-    root = BENCH.parents[1]
-    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    readme = " ".join((root / "README.md").read_text().split())  # lines joined
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    readme = _joined("README.md")  # lines joined
 
     tables = {
         (reference, partitions): _paired_rows(
@@ -453,9 +465,8 @@ def test_holm_adjustment_by_hand():
 def test_readme_holm_adjusted_p_values_are_those_of_the_saved_runs(bench):
     """The README's Holm-adjusted p-values of the three ablations, over the folds of every
     partition, follow from the p-values that ``--paired`` prints for them."""
-    root = BENCH.parents[1]
-    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    readme = " ".join((root / "README.md").read_text().split())
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    readme = _joined("README.md")
     cells = _paired_rows(bench.paired_table(runs, RERUN))
     adjusted = holm([float(cells[a][-1].lstrip("<")) for a in _ABLATIONS])
     a, b, c = (f"{p:.3f}" for p in adjusted)
@@ -487,9 +498,8 @@ README_SUMMARY = [
 def test_readme_summary_is_that_of_the_saved_runs(bench):
     """The accuracies of the README's short verdicts: every test mesh of seeds 0-2 on the
     fixed split, or on the five folds of partition 0."""
-    root = BENCH.parents[1]
-    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    readme = " ".join((root / "README.md").read_text().split())
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    readme = _joined("README.md")
 
     def accuracy(label: str, split: str) -> str:
         mine = [
@@ -885,9 +895,8 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
     mean and deviation over the 5 folds (every seed and ``--partition`` whose 5 folds were run), "not run"
     where there are none, and the parameters; the time per step from the saved
     ``--step-time`` measurement, as a ratio to the faithful DiffusionNet's."""
-    root = BENCH.parents[1]
-    runs = bench.with_averaged(json.loads((root / "benchmarks/results/bench_learning_runs.json").read_text()))
-    readme = (root / "README.md").read_text()
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    readme = (ROOT / "README.md").read_text()
     section = readme[readme.index("### Learning") : readme.index("### Real meshes")]
     rows = [
         [c.strip().strip("*") for c in line.strip("|").split("|")]
@@ -905,8 +914,7 @@ def test_readme_learning_table_is_that_of_the_saved_runs(bench):
         return f"{statistics.mean(xs):.3f} ± {statistics.stdev(xs):.3f}"
 
     steps = {
-        r["model"]: statistics.mean(r["seconds_per_step"])
-        for r in json.loads((root / "benchmarks/results/bench_learning_step_times.json").read_text())
+        r["model"]: statistics.mean(r["seconds_per_step"]) for r in _saved("bench_learning_step_times.json")
     }
     for model, recipe, fixed_cell, cross_cell, time_cell, parameters in rows:
         assert recipe in README_RECIPES, recipe
@@ -953,10 +961,8 @@ def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
     """The README's count of the fixed split's bearings with holes that each network
     classifies, over every saved run that recorded each mesh's class (the runs file and the
     re-runs of ``bench_learning_fixed_meshes.json``), averaged weights."""
-    root = BENCH.parents[1]
-    results = root / "benchmarks/results"
-    runs = json.loads((results / "bench_learning_runs.json").read_text())
-    reruns = json.loads((results / "bench_learning_fixed_meshes.json").read_text())
+    runs = _saved("bench_learning_runs.json")
+    reruns = _saved("bench_learning_fixed_meshes.json")
     dataset = bench.load_psb(psb)
     labels, classes = dataset["labels"], np.array(dataset["classes"])
     euler = _euler_of_closed(dataset)
@@ -984,7 +990,7 @@ def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
     others = [i for i in np.flatnonzero(dataset["split"] == 1) if i not in holes]
     level = count("edgefieldnet", reruns, others), count("edgefieldnet-scalar", reruns, others)
     assert level[0] == level[1]
-    readme = " ".join((root / "README.md").read_text().split())
+    readme = _joined("README.md")
     phrase = (
         f"the full network classifies {full[0]} of their {full[1]} (mesh, run) pairs (with or without the "
         f"curvature input), the network without the vector stream {scalar[0]} of {scalar[1]}; on the other "
@@ -996,8 +1002,7 @@ def test_readme_bearings_with_holes_are_those_of_the_saved_runs(bench, psb):
 def test_readme_topology_shift_is_that_of_the_saved_runs(bench, psb):
     """The README's counts on the split across topology: test meshes classified over seeds
     0-2 with the averaged weights, in all and among the cups, for each network."""
-    root = BENCH.parents[1]
-    runs = json.loads((root / "benchmarks/results/bench_learning_topology_runs.json").read_text())
+    runs = _saved("bench_learning_topology_runs.json")
     dataset = bench.load_psb(psb)
     labels, classes = dataset["labels"], np.array(dataset["classes"])
     flags = bench.topology_shift_flags(dataset)
@@ -1025,17 +1030,16 @@ def test_readme_topology_shift_is_that_of_the_saved_runs(bench, psb):
         f'the edge fields (`vector="vertex"`) {v}, and DiffusionNet {d};',
     }
     for path, phrase in phrases.items():
-        assert phrase in " ".join((root / path).read_text().split()), (path, phrase)
+        assert phrase in _joined(path), (path, phrase)
 
 
 def test_readme_curvature_input_costs_no_time():
     """The README's rows with the mean curvature input take the time of their network on
     the HKS alone, as it says: in the saved measurement, alternated with the HKS input,
     each network's step is within 5% of its step on the HKS."""
-    root = BENCH.parents[1]
-    readme = " ".join((root / "README.md").read_text().split())
+    readme = _joined("README.md")
     assert "the 9 extra channels cost no measurable time (within 5%" in readme
-    saved = json.loads((root / "benchmarks/results/bench_learning_step_times_curvature.json").read_text())
+    saved = _saved("bench_learning_step_times_curvature.json")
     for model in ("edgefieldnet", "diffusionnet-nodropout"):
         step = {
             i: statistics.mean(
