@@ -40,47 +40,22 @@ def mesh():
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
 
 
+def _small_edge_net(**options):
+    """A small EdgeFieldNet with ``options``, as a function of its head."""
+    return lambda head: models.EdgeFieldNet(
+        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, **options
+    )
+
+
 NETWORKS = {
-    "edge": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True
-    ),
-    "edge-meanpool": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, pool="mean"
-    ),
-    "edge-highpass": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, log_features=True, high_pass=True
-    ),
-    "edge-local": lambda head: models.EdgeFieldNet(
-        8,
-        5,
-        width=8,
-        vector_width=4,
-        num_blocks=2,
-        mlp=(8,),
-        head=head,
-        log_features=True,
-        field_diffusion=False,
-    ),
-    "edge-dropout": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector_dropout=0.5, head_dropout=0.5
-    ),
-    "edge-fieldread": lambda head: models.EdgeFieldNet(
-        8,
-        5,
-        width=8,
-        vector_width=4,
-        num_blocks=2,
-        mlp=(8,),
-        head=head,
-        log_features=True,
-        readout_fields=True,
-    ),
-    "edge-vertex-fieldread": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex", readout_fields=True
-    ),
-    "edge-vertex": lambda head: models.EdgeFieldNet(
-        8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,), head=head, vector="vertex"
-    ),
+    "edge": _small_edge_net(log_features=True),
+    "edge-meanpool": _small_edge_net(pool="mean"),
+    "edge-highpass": _small_edge_net(log_features=True, high_pass=True),
+    "edge-local": _small_edge_net(log_features=True, field_diffusion=False),
+    "edge-dropout": _small_edge_net(vector_dropout=0.5, head_dropout=0.5),
+    "edge-fieldread": _small_edge_net(log_features=True, readout_fields=True),
+    "edge-vertex-fieldread": _small_edge_net(vector="vertex", readout_fields=True),
+    "edge-vertex": _small_edge_net(vector="vertex"),
     "diffusionnet": lambda head: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,), head=head),
     "diffusionnet-logstd": lambda head: models.DiffusionNet(
         8, 5, width=8, num_blocks=2, mlp=(8,), head=head, pool="mean_std", log_features=True
