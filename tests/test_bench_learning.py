@@ -1073,3 +1073,37 @@ def test_precompute_times_only_the_meshes_it_computes(bench, tmp_path):
     batches, computed = bench.precompute(dataset, tmp_path)
     assert len(batches) == 2 and len(computed) == 1 and computed[0] > 0  # the second is cached
     assert bench.precompute(dataset, tmp_path)[1] == []
+
+
+def test_report_topology_validation_table_is_that_of_the_saved_runs(bench, psb):
+    """Each row of the report's table on the topology validation split: per seed the test
+    meshes classified with the averaged / final weights, their sums, and the cups and vases
+    classified (averaged weights), from the saved runs."""
+    runs = _saved("bench_learning_topology_validation_runs.json")
+    dataset = bench.load_psb(psb)
+    labels, classes = dataset["labels"], np.array(dataset["classes"])
+    flags = bench.topology_shift_flags(dataset, validation=True)
+    report = (ROOT / "benchmarks/results/bench_learning.md").read_text()
+    for model in dict.fromkeys(r["model"] for r in runs):
+        mine = sorted((r for r in runs if r["model"] == model), key=lambda r: r["seed"])
+        assert [r["seed"] for r in mine] == [0, 1, 2] and all(
+            r["split"] == "topology validation" for r in mine
+        )
+        cells, sums = [], {"averaged_test_predictions": 0, "test_predictions": 0, "cup": 0, "vase": 0}
+        for r in mine:
+            assert sorted(r["test_meshes"]) == np.flatnonzero(flags == 1).tolist()
+            right = {}
+            for key in ("averaged_test_predictions", "test_predictions"):
+                right[key] = sum(int(p == labels[m]) for m, p in zip(r["test_meshes"], r[key]))
+                sums[key] += right[key]
+            for c in ("cup", "vase"):
+                sums[c] += sum(
+                    int(p == labels[m] and classes[labels[m]] == c)
+                    for m, p in zip(r["test_meshes"], r["averaged_test_predictions"])
+                )
+            cells.append(f"{right['averaged_test_predictions']} / {right['test_predictions']}")
+        row = f"| `{model}` | " + " | ".join(cells) + " | "
+        assert row in report, row
+        tail = report[report.index(row) + len(row) :].split("\n")[0]
+        numbers = [int(x) for x in tail.replace("*", "").strip(" |").split(" | ")]
+        assert numbers == [sums[k] for k in ("averaged_test_predictions", "test_predictions", "cup", "vase")]
