@@ -100,7 +100,7 @@ def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean
 
 
 def _check_edge_options(vector: str, **options: bool) -> None:
-    """Each option a bool, and ``False`` (a change to the edge-based vector stream) only with ``vector="edge"``."""
+    """Each option a bool; ``False`` (a change to the edge fields) only with ``vector="edge"``."""
     for name, value in options.items():
         if not isinstance(value, bool):
             raise ValueError(f"{name} must be True or False, got {value!r}")
