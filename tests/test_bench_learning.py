@@ -1109,9 +1109,10 @@ def test_report_topology_validation_table_is_that_of_the_saved_runs(bench, psb):
         assert numbers == [sums[k] for k in ("averaged_test_predictions", "test_predictions", "cup", "vase")]
 
 
-def test_report_meanpool_candidate_on_the_validation_split_is_that_of_the_saved_runs():
-    """The report's validation row of the candidate with DiffusionNet's readout: correct
-    of 76 per seed with the averaged / final weights, and the sums, from the runs file."""
+def test_report_meanpool_candidate_is_that_of_the_saved_runs():
+    """The report's validation row and fixed-split counts of the candidate with
+    DiffusionNet's readout: correct of 76 per seed with the averaged / final weights, and
+    the sums, from the runs file."""
     runs = _saved("bench_learning_runs.json")
     mine = sorted(
         (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"] == "validation"),
@@ -1122,3 +1123,16 @@ def test_report_meanpool_candidate_on_the_validation_split_is_that_of_the_saved_
     row = "| validation (of 228) | " + " | ".join(f"{a} / {f}" for a, f in pairs)
     row += f" | **{sum(a for a, _ in pairs)}** | {sum(f for _, f in pairs)} | at least 200 |"
     assert row in (ROOT / "benchmarks/results/bench_learning.md").read_text(), row
+    fixed = sorted(
+        (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"] == "fixed"),
+        key=lambda r: r["seed"],
+    )
+    assert [r["seed"] for r in fixed] == [0, 1, 2]
+    pairs = [(round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in fixed]
+    phrase = "On the fixed split (seeds 0, 1, 2), correct of 76 with the averaged / final weights: "
+    phrase += (
+        f"{pairs[0][0]} / {pairs[0][1]}, {pairs[1][0]} / {pairs[1][1]} and {pairs[2][0]} / {pairs[2][1]}. "
+    )
+    averaged = sum(a for a, _ in pairs)
+    phrase += f"**{averaged} of 228 ({averaged / 228:.3f}) with the recommended averaged weights"
+    assert phrase in _joined("benchmarks/results/bench_learning.md"), phrase
