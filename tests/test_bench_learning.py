@@ -1136,3 +1136,13 @@ def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     averaged = sum(a for a, _ in pairs)
     phrase += f"**{averaged} of 228 ({averaged / 228:.3f}) with the recommended averaged weights"
     assert phrase in _joined("benchmarks/results/bench_learning.md"), phrase
+    folds = sorted(
+        (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"].startswith("fold")),
+        key=lambda r: r["split"],
+    )
+    assert [r["split"] for r in folds] == [f"fold{k}" for k in range(5)] and {r["seed"] for r in folds} == {0}
+    averaged = [round(r["averaged_test_accuracy"] * 76) for r in folds]
+    final = sum(round(r["test_accuracy"] * 76) for r in folds)
+    row = f"| `edgefieldnet-meanpool` | {', '.join(map(str, averaged))} | "
+    row += f"**{sum(averaged)}** (final weights {final}) |"
+    assert row in (ROOT / "benchmarks/results/bench_learning.md").read_text(), row
