@@ -1146,3 +1146,39 @@ def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     row = f"| `edgefieldnet-meanpool` | {', '.join(map(str, averaged))} | "
     row += f"**{sum(averaged)}** (final weights {final}) |"
     assert row in (ROOT / "benchmarks/results/bench_learning.md").read_text(), row
+
+
+def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
+    """The README's counts for the network with DiffusionNet's readout and its two
+    references: seeds 0-2 on the topology validation split, the validation split and the
+    fixed split, and seed 0 of the folds of partition 0, averaged weights."""
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    across = bench.with_averaged(_saved("bench_learning_topology_validation_runs.json"))
+    mean = "edgefieldnet-meanpool, 4 stretched copies, averaged last 10"
+    alike = "diffusionnet-nodropout, 4 stretched copies, averaged last 10"
+
+    def right(rs, name, split, seeds=(0, 1, 2)):  # correct test meshes summed over the runs
+        mine = [
+            r for r in rs if bench.label(r) == name and r["split"] == split and r.get("partition", 0) == 0
+        ]
+        mine = [r for r in mine if r["seed"] in seeds]
+        assert sorted(r["seed"] for r in mine) == sorted(seeds), (name, split)
+        size = 31 if split == "topology validation" else 76  # older runs did not record their meshes
+        return sum(round(r["test_accuracy"] * size) for r in mine)
+
+    def folds(name):
+        return sum(right(runs, name, f"fold{k}", (0,)) for k in range(5))
+
+    t = [right(across, n, "topology validation") for n in (mean, RERUN, alike)]
+    v = [right(runs, n, "validation") for n in (mean, RERUN)]
+    f = [right(runs, n, "fixed") / 228 for n in (mean, RERUN)]
+    c = [folds(n) for n in (mean, RERUN, alike)]
+    phrase = (
+        f"the same network classifies {t[0]} of 93 on a split across topology inside the training "
+        f"meshes (`--topology-shift --validation`; the recommended network {t[1]}, DiffusionNet "
+        f"trained alike {t[2]}), {v[0]} of 228 on the validation split ({v[1]}), {f[0]:.3f} on the "
+        f"fixed split ({f[1]:.3f}; the 0.90 target is still missed) and {c[0]} of 380 on the folds "
+        f"of seed 0 (the recommended network {c[1]}, DiffusionNet trained alike {c[2]})."
+    )
+    assert phrase in _joined("README.md"), phrase
+    assert f[0] < 0.9
