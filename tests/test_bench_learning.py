@@ -1182,3 +1182,25 @@ def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
     )
     assert phrase in _joined("README.md"), phrase
     assert f[0] < 0.9
+
+
+def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(bench, psb):
+    """The README's count for the network whose fields are not diffused on the fixed split
+    (seeds 0-2, averaged weights), in all and on the three bearings with holes."""
+    runs = [r for r in _saved("bench_learning_runs.json") if r["model"] == "edgefieldnet-local"]
+    runs = [r for r in runs if r["split"] == "fixed"]
+    assert sorted(r["seed"] for r in runs) == [0, 1, 2]
+    dataset = bench.load_psb(psb)
+    labels, classes = dataset["labels"], np.array(dataset["classes"])
+    euler = _euler_of_closed(dataset)
+    right = holes = pairs = 0
+    for r in runs:
+        for m, p in zip(r["test_meshes"], r["averaged_test_predictions"]):
+            right += int(p == labels[m])
+            if classes[labels[m]] == "bearing" and euler[m] != 2:
+                holes, pairs = holes + int(p == labels[m]), pairs + 1
+    phrase = (
+        f"classify {right} of 228 of the fixed split's test meshes ({right / 228:.3f}) and all {holes} "
+        f"(mesh, seed) pairs of its bearings with holes;"
+    )
+    assert holes == pairs == 9 and phrase in _joined("README.md"), phrase
