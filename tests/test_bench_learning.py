@@ -1114,38 +1114,41 @@ def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     DiffusionNet's readout: correct of 76 per seed with the averaged / final weights, and
     the sums, from the runs file."""
     runs = _saved("bench_learning_runs.json")
-    mine = sorted(
-        (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"] == "validation"),
-        key=lambda r: r["seed"],
-    )
-    assert [r["seed"] for r in mine] == [0, 1, 2]
-    pairs = [(round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in mine]
+    report = _joined("benchmarks/results/bench_learning.md")
+
+    def counts(split, order):  # (averaged, final) correct of 76 per run of the split, in order
+        mine = sorted(
+            (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"].startswith(split)),
+            key=order,
+        )
+        return [order(r) for r in mine], [
+            (round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in mine
+        ]
+
+    def seed(r):
+        return r["seed"]
+
+    def fold(r):  # fold k of seed 0
+        assert r["seed"] == 0
+        return r["split"]
+
+    keys, pairs = counts("validation", seed)
+    assert keys == [0, 1, 2]
     row = "| validation (of 228) | " + " | ".join(f"{a} / {f}" for a, f in pairs)
     row += f" | **{sum(a for a, _ in pairs)}** | {sum(f for _, f in pairs)} | at least 200 |"
-    assert row in (ROOT / "benchmarks/results/bench_learning.md").read_text(), row
-    fixed = sorted(
-        (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"] == "fixed"),
-        key=lambda r: r["seed"],
-    )
-    assert [r["seed"] for r in fixed] == [0, 1, 2]
-    pairs = [(round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in fixed]
+    assert row in report, row
+    keys, pairs = counts("fixed", seed)
+    assert keys == [0, 1, 2]
     phrase = "On the fixed split (seeds 0, 1, 2), correct of 76 with the averaged / final weights: "
-    phrase += (
-        f"{pairs[0][0]} / {pairs[0][1]}, {pairs[1][0]} / {pairs[1][1]} and {pairs[2][0]} / {pairs[2][1]}. "
-    )
+    phrase += ", ".join(f"{a} / {f}" for a, f in pairs[:2]) + f" and {pairs[2][0]} / {pairs[2][1]}. "
     averaged = sum(a for a, _ in pairs)
     phrase += f"**{averaged} of 228 ({averaged / 228:.3f}) with the recommended averaged weights"
-    assert phrase in _joined("benchmarks/results/bench_learning.md"), phrase
-    folds = sorted(
-        (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"].startswith("fold")),
-        key=lambda r: r["split"],
-    )
-    assert [r["split"] for r in folds] == [f"fold{k}" for k in range(5)] and {r["seed"] for r in folds} == {0}
-    averaged = [round(r["averaged_test_accuracy"] * 76) for r in folds]
-    final = sum(round(r["test_accuracy"] * 76) for r in folds)
-    row = f"| `edgefieldnet-meanpool` | {', '.join(map(str, averaged))} | "
-    row += f"**{sum(averaged)}** (final weights {final}) |"
-    assert row in (ROOT / "benchmarks/results/bench_learning.md").read_text(), row
+    assert phrase in report, phrase
+    keys, pairs = counts("fold", fold)
+    assert keys == [f"fold{k}" for k in range(5)]
+    row = f"| `edgefieldnet-meanpool` | {', '.join(str(a) for a, _ in pairs)} | "
+    row += f"**{sum(a for a, _ in pairs)}** (final weights {sum(f for _, f in pairs)}) |"
+    assert row in report, row
 
 
 def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
