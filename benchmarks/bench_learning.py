@@ -110,6 +110,8 @@ MODELS = {
     "edgefieldnet-nodiv": _model(models.EdgeFieldNet, logs=True, divergence=False),
     # the fields not diffused: the gradients on the edges as they are, every feature local
     "edgefieldnet-local": _model(models.EdgeFieldNet, logs=True, field_diffusion=False),
+    # both: the fields not diffused and DiffusionNet's readout
+    "edgefieldnet-local-meanpool": _model(models.EdgeFieldNet, logs=True, field_diffusion=False, pool="mean"),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
     "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
     "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),
