@@ -104,7 +104,12 @@ MODELS = {
     "edgefieldnet-scalar": _model(models.EdgeFieldNet, logs=True, vector="none"),
     "edgefieldnet-vertexvec": _model(models.EdgeFieldNet, logs=True, vector="vertex"),
     "edgefieldnet-fixedtime": _model(models.EdgeFieldNet, logs=True, learn_times=False),
+    # DiffusionNet's readout (a linear layer per vertex, the mean of the logits), and its
+    # ablations
     "edgefieldnet-meanpool": _model(models.EdgeFieldNet, logs=True, pool="mean"),
+    "edgefieldnet-meanpool-scalar": _model(models.EdgeFieldNet, logs=True, pool="mean", vector="none"),
+    "edgefieldnet-meanpool-vertexvec": _model(models.EdgeFieldNet, logs=True, pool="mean", vector="vertex"),
+    "edgefieldnet-meanpool-fixedtime": _model(models.EdgeFieldNet, logs=True, pool="mean", learn_times=False),
     # the fields' high frequencies (what the L_c diffusion removes) added back, learned
     "edgefieldnet-highpass": _model(models.EdgeFieldNet, logs=True, high_pass=True),
     "edgefieldnet-nodiv": _model(models.EdgeFieldNet, logs=True, divergence=False),

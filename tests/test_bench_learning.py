@@ -231,6 +231,35 @@ def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_s
         assert rest.keys() == ref.keys() and all(torch.equal(w, ref[k]) for k, w in rest.items())
 
 
+@pytest.mark.parametrize(
+    "base",
+    [
+        "edgefieldnet",
+        "edgefieldnet-scalar",
+        "edgefieldnet-vertexvec",
+        "edgefieldnet-fixedtime",
+        "edgefieldnet-local",
+    ],
+)
+def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(bench, base):
+    """``edgefieldnet-meanpool-X`` (``edgefieldnet-local-meanpool``) is ``edgefieldnet-X``
+    (``edgefieldnet-local``) with ``pool="mean"``: the same layers, parameters and buffers,
+    and a last layer on the last scalars alone, not on their mean and deviation."""
+    name = {"edgefieldnet": "edgefieldnet-meanpool", "edgefieldnet-local": "edgefieldnet-local-meanpool"}.get(
+        base, base.replace("edgefieldnet-", "edgefieldnet-meanpool-")
+    )
+    net, ref = bench.MODELS[name](16, 19, True), bench.MODELS[base](16, 19, True)
+    assert (net.pool, ref.pool) == ("mean", "mean_std")
+    assert 2 * net.last.in_features == ref.last.in_features
+
+    def layers(m):
+        named = [*m.named_parameters(), *m.named_buffers()]
+        kept = {k: (tuple(w.shape), w.requires_grad) for k, w in named if not k.startswith("last.")}
+        return kept, [line for line in str(m).splitlines() if "(last)" not in line]
+
+    assert layers(net) == layers(ref)
+
+
 @pytest.mark.slow
 def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, capsys):
     pytest.importorskip("robust_laplacian")
