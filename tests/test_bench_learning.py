@@ -1138,46 +1138,61 @@ def test_report_topology_validation_table_is_that_of_the_saved_runs(bench, psb):
         assert numbers == [sums[k] for k in ("averaged_test_predictions", "test_predictions", "cup", "vase")]
 
 
+def _per_run(runs, model, split, key, seeds=(0, 1, 2)):
+    """The runs of ``model`` on the splits whose name starts with ``split``, of ``seeds``,
+    ordered by ``key``: their keys and their (averaged, final) correct of 76."""
+    mine = sorted(
+        (r for r in runs if r["model"] == model and r["split"].startswith(split) and r["seed"] in seeds),
+        key=key,
+    )
+    return [key(r) for r in mine], [
+        (round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in mine
+    ]
+
+
+def _rule_row(pairs, bound):  # the validation row of a candidate's results table
+    row = "| validation (of 228) | " + " | ".join(f"{a} / {f}" for a, f in pairs)
+    return row + f" | **{sum(a for a, _ in pairs)}** | {sum(f for _, f in pairs)} | at least {bound} |"
+
+
+def _seed(r):
+    return r["seed"]
+
+
 def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     """The report's validation row and fixed-split counts of the candidate with
     DiffusionNet's readout: correct of 76 per seed with the averaged / final weights, and
     the sums, from the runs file."""
     runs = _saved("bench_learning_runs.json")
     report = _joined("benchmarks/results/bench_learning.md")
-
-    def counts(split, order):  # (averaged, final) correct of 76 per run of the split, in order
-        mine = sorted(
-            (r for r in runs if r["model"] == "edgefieldnet-meanpool" and r["split"].startswith(split)),
-            key=order,
-        )
-        return [order(r) for r in mine], [
-            (round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in mine
-        ]
-
-    def seed(r):
-        return r["seed"]
-
-    def fold(r):  # fold k of seed 0
-        assert r["seed"] == 0
-        return r["split"]
-
-    keys, pairs = counts("validation", seed)
+    keys, pairs = _per_run(runs, "edgefieldnet-meanpool", "validation", _seed)
     assert keys == [0, 1, 2]
-    row = "| validation (of 228) | " + " | ".join(f"{a} / {f}" for a, f in pairs)
-    row += f" | **{sum(a for a, _ in pairs)}** | {sum(f for _, f in pairs)} | at least 200 |"
+    row = _rule_row(pairs, 200)
     assert row in report, row
-    keys, pairs = counts("fixed", seed)
+    keys, pairs = _per_run(runs, "edgefieldnet-meanpool", "fixed", _seed)
     assert keys == [0, 1, 2]
     phrase = "On the fixed split (seeds 0, 1, 2), correct of 76 with the averaged / final weights: "
     phrase += ", ".join(f"{a} / {f}" for a, f in pairs[:2]) + f" and {pairs[2][0]} / {pairs[2][1]}. "
     averaged = sum(a for a, _ in pairs)
     phrase += f"**{averaged} of 228 ({averaged / 228:.3f}) with the recommended averaged weights"
     assert phrase in report, phrase
-    keys, pairs = counts("fold", fold)
+    keys, pairs = _per_run(runs, "edgefieldnet-meanpool", "fold", lambda r: r["split"], seeds=(0,))
     assert keys == [f"fold{k}" for k in range(5)]
     row = f"| `edgefieldnet-meanpool` | {', '.join(str(a) for a, _ in pairs)} | "
     row += f"**{sum(a for a, _ in pairs)}** (final weights {sum(f for _, f in pairs)}) |"
     assert row in report, row
+
+
+def test_report_combined_candidate_is_that_of_the_saved_runs():
+    """The validation row of the candidate with both changes (the fields not diffused,
+    DiffusionNet's readout), and its verdict, from the runs file."""
+    runs = _saved("bench_learning_runs.json")
+    report = _joined("benchmarks/results/bench_learning.md")
+    keys, pairs = _per_run(runs, "edgefieldnet-local-meanpool", "validation", _seed)
+    assert keys == [0, 1, 2]
+    row = _rule_row(pairs, 200)
+    assert row in report, row
+    assert sum(a for a, _ in pairs) < 200 and "**The combined candidate is rejected**" in report
 
 
 def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
