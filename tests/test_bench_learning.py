@@ -1183,6 +1183,54 @@ def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     assert row in report, row
 
 
+def test_report_meanpool_folds_and_rule_are_those_of_the_saved_runs(bench):
+    """The fold table of the network with DiffusionNet's readout, its three references and
+    its network without the vector stream (partition 0, correct of 76 per fold), and the
+    rule's verdict, from the runs file."""
+    runs = bench.with_averaged(_saved("bench_learning_runs.json"))
+    report = _joined("benchmarks/results/bench_learning.md")
+    copies = "4 stretched copies"
+
+    def folds(name, seed):  # correct of 76 on folds 0-4 of partition 0
+        mine = {
+            r["split"]: round(r["test_accuracy"] * 76)
+            for r in runs
+            if bench.label(r) == name
+            and r["seed"] == seed
+            and r.get("partition", 0) == 0
+            and r["split"].startswith("fold")
+        }
+        assert sorted(mine) == [f"fold{k}" for k in range(5)], (name, seed)
+        return [mine[f"fold{k}"] for k in range(5)]
+
+    def row(cell, name, seeds=(0, 1, 2)):
+        per = [folds(name, s) for s in seeds]
+        cells = " | ".join(", ".join(map(str, f)) for f in per)
+        return f"| {cell} | {cells} |", sum(map(sum, per))
+
+    mean, mean_total = row("`edgefieldnet-meanpool`", f"edgefieldnet-meanpool, {copies}, averaged last 10")
+    _, final_total = row("", f"edgefieldnet-meanpool, {copies}")
+    assert f"{mean} **{mean_total:,}** (final weights {final_total:,}) |" in report
+    ours, ours_total = row(
+        "`edgefieldnet`, the recommended recipe", f"edgefieldnet, {copies}, coefficients, averaged last 10"
+    )
+    alike, alike_total = row(
+        "faithful DiffusionNet, trained alike", f"diffusionnet-nodropout, {copies}, averaged last 10"
+    )
+    own, own_total = row("faithful DiffusionNet, its own recipe (final weights)", "diffusionnet-nodropout")
+    for line, total in ((ours, ours_total), (alike, alike_total), (own, own_total)):
+        assert f"{line} {total:,} |" in report, line
+    without = f"edgefieldnet-meanpool-scalar, {copies}, averaged last 10"
+    scalar, scalar_total = row("`edgefieldnet-meanpool-scalar` (no vector stream)", without, (0,))
+    assert f"{scalar} | | {scalar_total} of 380 |" in report
+    bound = ours_total - 6  # the rule: the recommended network's count less two a seed
+    mean_seed0 = folds(f"edgefieldnet-meanpool, {copies}, averaged last 10", 0)
+    lower = sum(a < b for a, b in zip(folds(without, 0), mean_seed0))
+    assert f"at least {bound:,} of 1,140" in report
+    verdict = '**`pool="mean"` does not become the recommended network**'
+    assert (mean_total >= bound and lower >= 4) != (verdict in report)
+
+
 def test_report_combined_candidate_is_that_of_the_saved_runs():
     """The validation row of the candidate with both changes (the fields not diffused,
     DiffusionNet's readout), and its verdict, from the runs file."""
