@@ -1261,8 +1261,8 @@ def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
         size = 31 if split == "topology validation" else 76  # older runs did not record their meshes
         return sum(round(r["test_accuracy"] * size) for r in mine)
 
-    def folds(name):
-        return sum(right(runs, name, f"fold{k}", (0,)) for k in range(5))
+    def folds(name):  # accuracy over the folds of seeds 0-2
+        return sum(right(runs, name, f"fold{k}", (s,)) for k in range(5) for s in (0, 1, 2)) / 1140
 
     t = [right(across, n, "topology validation") for n in (mean, RERUN, alike)]
     v = [right(runs, n, "validation") for n in (mean, RERUN)]
@@ -1271,12 +1271,19 @@ def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
     phrase = (
         f"the same network classifies {t[0]} of 93 on a split across topology inside the training "
         f"meshes (`--topology-shift --validation`; the recommended network {t[1]}, DiffusionNet "
-        f"trained alike {t[2]}), {v[0]} of 228 on the validation split ({v[1]}), {f[0]:.3f} on the "
-        f"fixed split ({f[1]:.3f}; the 0.90 target is still missed) and {c[0]} of 380 on the folds "
-        f"of seed 0 (the recommended network {c[1]}, DiffusionNet trained alike {c[2]})."
+        f"trained alike {t[2]}), {v[0]} of 228 on the validation split ({v[1]}) and {f[0]:.3f} on the "
+        f"fixed split ({f[1]:.3f}; the 0.90 target is still missed). On the folds of 3 seeds it "
+        f"classifies {c[0]:.3f} (the recommended network {c[1]:.3f}, DiffusionNet trained alike "
+        f"{c[2]:.3f}): short of the bar"
     )
     assert phrase in _joined("README.md"), phrase
-    assert f[0] < 0.9
+    assert f[0] < 0.9 and round(c[0] * 1140) < round(c[1] * 1140) - 6
+    both = right(runs, "edgefieldnet-local-meanpool, 4 stretched copies, averaged last 10", "validation")
+    readme = _joined("README.md")
+    assert f"Both changes together do worse than either ({both} of 228 on the validation split)" in readme
+    assert both < min(
+        v[0], right(runs, "edgefieldnet-local, 4 stretched copies, averaged last 10", "validation")
+    )
 
 
 def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(bench, psb):
@@ -1299,3 +1306,16 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
         f"(mesh, seed) pairs of its bearings with holes;"
     )
     assert holes == pairs == 9 and phrase in _joined("README.md"), phrase
+    rows = bench.with_averaged(_saved("bench_learning_runs.json"))
+
+    def folds(name):  # correct of the folds of seed 0 that the local fields ran, partition 0
+        mine = [r for r in rows if bench.label(r) == name and r["seed"] == 0 and r.get("partition", 0) == 0]
+        return {r["split"]: round(r["test_accuracy"] * 76) for r in mine if r["split"].startswith("fold")}
+
+    local = folds("edgefieldnet-local, 4 stretched copies, averaged last 10")
+    ours = folds(RERUN)
+    phrase = (
+        f"on {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} against "
+        f"the recommended network's {sum(ours[k] for k in local)}."
+    )
+    assert phrase in _joined("README.md"), phrase
