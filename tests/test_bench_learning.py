@@ -1062,6 +1062,33 @@ def test_readme_topology_shift_is_that_of_the_saved_runs(bench, psb):
         assert phrase in _joined(path), (path, phrase)
 
 
+def test_report_topology_table_is_that_of_the_saved_runs(bench, psb):
+    """Every row of the report's table across topology: correct test meshes per seed and in
+    all (averaged weights), with the final weights, and per group of classes, from the
+    saved runs of each network."""
+    runs = _saved("bench_learning_topology_runs.json")
+    dataset = bench.load_psb(psb)
+    labels, classes = dataset["labels"], np.array(dataset["classes"])
+    report = _joined("benchmarks/results/bench_learning.md")
+    for model in dict.fromkeys(r["model"] for r in runs):
+        mine = sorted((r for r in runs if r["model"] == model), key=_seed)
+        assert [r["seed"] for r in mine] == [0, 1, 2], model
+        per_seed, final, groups = [], 0, {"cup": 0, "vase": 0, "bearing": 0, "other": 0}
+        for r in mine:
+            right = [p == labels[m] for m, p in zip(r["test_meshes"], r["averaged_test_predictions"])]
+            per_seed.append(sum(right))
+            final += sum(p == labels[m] for m, p in zip(r["test_meshes"], r["test_predictions"]))
+            for m, ok in zip(r["test_meshes"], right):
+                group = classes[labels[m]]
+                groups[group if group in groups else "other"] += int(ok)
+        cells = [*map(str, per_seed), f"{sum(per_seed)} of 117", str(final)]
+        cells += [
+            f"{groups[g]} of {n}" for g, n in (("cup", 48), ("vase", 36), ("bearing", 9), ("other", 24))
+        ]
+        row = " | ".join(cells) + " |"
+        assert any(f"| `{model}`{tail} | {row}" in report for tail in ("", " (run later)")), (model, row)
+
+
 def test_readme_curvature_input_costs_no_time():
     """The README's rows with the mean curvature input take the time of their network on
     the HKS alone, as it says: in the saved measurement, alternated with the HKS input,
