@@ -1253,6 +1253,9 @@ def test_report_meanpool_folds_and_rule_are_those_of_the_saved_runs(bench):
     without = f"edgefieldnet-meanpool-scalar, {copies}, averaged last 10"
     scalar, scalar_total = row("`edgefieldnet-meanpool-scalar` (no vector stream)", without, (0,))
     assert f"{scalar} | | {scalar_total} of 380 |" in report
+    vertex = f"edgefieldnet-meanpool-vertexvec, {copies}, averaged last 10"
+    line, total = row("`edgefieldnet-meanpool-vertexvec` (vertex gradients)", vertex, (0,))
+    assert f"{line} | | {total} of 380 |" in report
     bound = ours_total - 6  # the rule: the recommended network's count less two a seed
     mean_seed0 = folds(f"edgefieldnet-meanpool, {copies}, averaged last 10", 0)
     lower = sum(a < b for a, b in zip(folds(without, 0), mean_seed0))
