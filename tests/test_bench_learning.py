@@ -1356,7 +1356,7 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
     local = folds("edgefieldnet-local, 4 stretched copies, averaged last 10")
     ours = folds(RERUN)
     phrase = (
-        f"on {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} against "
+        f"on the {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} against "
         f"the recommended network's {sum(ours[k] for k in local)}."
     )
     assert phrase in _joined("README.md"), phrase
