@@ -1253,9 +1253,13 @@ def test_report_meanpool_folds_and_rule_are_those_of_the_saved_runs(bench):
     without = f"edgefieldnet-meanpool-scalar, {copies}, averaged last 10"
     scalar, scalar_total = row("`edgefieldnet-meanpool-scalar` (no vector stream)", without, (0,))
     assert f"{scalar} | | {scalar_total} of 380 |" in report
-    vertex = f"edgefieldnet-meanpool-vertexvec, {copies}, averaged last 10"
-    line, total = row("`edgefieldnet-meanpool-vertexvec` (vertex gradients)", vertex, (0,))
-    assert f"{line} | | {total} of 380 |" in report
+    for cell, name in (("vertex gradients", "vertexvec"), ("times frozen", "fixedtime")):
+        line, total = row(
+            f"`edgefieldnet-meanpool-{name}` ({cell})",
+            f"edgefieldnet-meanpool-{name}, {copies}, averaged last 10",
+            (0,),
+        )
+        assert f"{line} | | {total} of 380 |" in report, line
     bound = ours_total - 6  # the rule: the recommended network's count less two a seed
     mean_seed0 = folds(f"edgefieldnet-meanpool, {copies}, averaged last 10", 0)
     lower = sum(a < b for a, b in zip(folds(without, 0), mean_seed0))
@@ -1356,7 +1360,7 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
     local = folds("edgefieldnet-local, 4 stretched copies, averaged last 10")
     ours = folds(RERUN)
     phrase = (
-        f"on the {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} against "
-        f"the recommended network's {sum(ours[k] for k in local)}."
+        f"on the {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} "
+        f"against the recommended network's {sum(ours[k] for k in local)}."
     )
     assert phrase in _joined("README.md"), phrase
