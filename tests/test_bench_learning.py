@@ -411,6 +411,23 @@ def _joined(path: str) -> str:
     return " ".join((ROOT / path).read_text().split())
 
 
+def _seed(r):
+    return r["seed"]
+
+
+def _fold_counts(bench, rows, label, seed) -> dict[str, int]:
+    """Correct of 76 per fold (``"fold0"``, ...) of partition 0 for the runs of ``seed``
+    labelled ``label`` (``rows`` through ``bench.with_averaged``)."""
+    return {
+        r["split"]: round(r["test_accuracy"] * 76)
+        for r in rows
+        if bench.label(r) == label
+        and r["seed"] == seed
+        and r.get("partition", 0) == 0
+        and r["split"].startswith("fold")
+    }
+
+
 _ALIKE = "diffusionnet-nodropout, 4 stretched copies, averaged last 10"
 _DROPOUT_ALIKE = "diffusionnet, 4 stretched copies, averaged last 10"
 _ABLATIONS = [
@@ -1187,10 +1204,6 @@ def _validation_row(runs, model, bound=200):
     return row + f" | **{sum(a for a, _ in pairs)}** | {sum(f for _, f in pairs)} | at least {bound} |", pairs
 
 
-def _seed(r):
-    return r["seed"]
-
-
 def test_report_meanpool_candidate_is_that_of_the_saved_runs():
     """The report's validation row and fixed-split counts of the candidate with
     DiffusionNet's readout: correct of 76 per seed with the averaged / final weights, and
@@ -1222,14 +1235,7 @@ def test_report_meanpool_folds_and_rule_are_those_of_the_saved_runs(bench):
     copies = "4 stretched copies"
 
     def folds(name, seed):  # correct of 76 on folds 0-4 of partition 0
-        mine = {
-            r["split"]: round(r["test_accuracy"] * 76)
-            for r in runs
-            if bench.label(r) == name
-            and r["seed"] == seed
-            and r.get("partition", 0) == 0
-            and r["split"].startswith("fold")
-        }
+        mine = _fold_counts(bench, runs, name, seed)
         assert sorted(mine) == [f"fold{k}" for k in range(5)], (name, seed)
         return [mine[f"fold{k}"] for k in range(5)]
 
@@ -1315,14 +1321,13 @@ def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
         f"on the validation split ({v[1]}) and {f[0]:.3f} on the fixed split ({f[1]:.3f}; the 0.90 "
         f"target is still missed); {w['edgefieldnet-meanpool']} of 117 on the whole split across "
         f"topology ({w['edgefieldnet']}; without edge fields {apart[0]}-{apart[-1]}). On the folds of 3 "
-        f"seeds it "
-        f"classifies {c[0]:.3f} (the recommended network {c[1]:.3f}, DiffusionNet trained alike "
+        f"seeds it classifies {c[0]:.3f} (the recommended network {c[1]:.3f}, DiffusionNet trained alike "
         f"{c[2]:.3f}): short of the bar"
     )
-    assert phrase in _joined("README.md"), phrase
+    readme = _joined("README.md")
+    assert phrase in readme, phrase
     assert f[0] < 0.9 and round(c[0] * 1140) < round(c[1] * 1140) - 6
     both = right(runs, "edgefieldnet-local-meanpool, 4 stretched copies, averaged last 10", "validation")
-    readme = _joined("README.md")
     assert (
         f"readout as well they do worse than either change ({both} of 228 on the validation split)" in readme
     )
@@ -1352,13 +1357,8 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
     )
     assert holes == pairs == 9 and phrase in _joined("README.md"), phrase
     rows = bench.with_averaged(_saved("bench_learning_runs.json"))
-
-    def folds(name):  # correct of the folds of seed 0 that the local fields ran, partition 0
-        mine = [r for r in rows if bench.label(r) == name and r["seed"] == 0 and r.get("partition", 0) == 0]
-        return {r["split"]: round(r["test_accuracy"] * 76) for r in mine if r["split"].startswith("fold")}
-
-    local = folds("edgefieldnet-local, 4 stretched copies, averaged last 10")
-    ours = folds(RERUN)
+    local = _fold_counts(bench, rows, "edgefieldnet-local, 4 stretched copies, averaged last 10", 0)
+    ours = _fold_counts(bench, rows, RERUN, 0)
     phrase = (
         f"on the {len(local)} folds of seed 0 they classify {sum(local.values())} of {76 * len(local)} "
         f"against the recommended network's {sum(ours[k] for k in local)}."
