@@ -1326,6 +1326,12 @@ def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
     )
     readme = _joined("README.md")
     assert phrase in readme, phrase
+    docs = (
+        f"across topology ({t[0]} of 93 against {t[1]} on `--topology-shift --validation`, DiffusionNet "
+        f"{t[2]}), at a small cost on the folds ({c[0]:.3f} against {c[1]:.3f} over 3 seeds; DiffusionNet "
+        f"trained alike {c[2]:.3f})."
+    )
+    assert docs in _joined("docs/learning.md"), docs
     assert f[0] < 0.9 and round(c[0] * 1140) < round(c[1] * 1140) - 6
     both = right(runs, "edgefieldnet-local-meanpool, 4 stretched copies, averaged last 10", "validation")
     assert (
@@ -1364,3 +1370,8 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
         f"against the recommended network's {sum(ours[k] for k in local)}."
     )
     assert phrase in _joined("README.md"), phrase
+    docs = (
+        f"on the {len(local)} folds of seed 0 it classifies {sum(local.values())} of {76 * len(local)} "
+        f"against {sum(ours[k] for k in local)})."
+    )
+    assert docs in _joined("docs/learning.md"), docs
