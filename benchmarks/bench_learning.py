@@ -117,6 +117,8 @@ MODELS = {
     "edgefieldnet-local": _model(models.EdgeFieldNet, logs=True, field_diffusion=False),
     # both: the fields not diffused and DiffusionNet's readout
     "edgefieldnet-local-meanpool": _model(models.EdgeFieldNet, logs=True, field_diffusion=False, pool="mean"),
+    # DiffusionNet's readout without the divergence and curl of the fields
+    "edgefieldnet-nodiv-meanpool": _model(models.EdgeFieldNet, logs=True, divergence=False, pool="mean"),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
     "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
     "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),

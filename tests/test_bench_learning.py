@@ -240,15 +240,19 @@ def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_s
         "edgefieldnet-vertexvec",
         "edgefieldnet-fixedtime",
         "edgefieldnet-local",
+        "edgefieldnet-nodiv",
     ],
 )
 def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(bench, base):
-    """``edgefieldnet-meanpool-X`` (``edgefieldnet-local-meanpool``) is ``edgefieldnet-X``
-    (``edgefieldnet-local``) with ``pool="mean"``: the same layers, parameters and buffers,
+    """``edgefieldnet-meanpool-X`` (``edgefieldnet-local-meanpool``,
+    ``edgefieldnet-nodiv-meanpool``) is ``edgefieldnet-X`` (``edgefieldnet-local``,
+    ``edgefieldnet-nodiv``) with ``pool="mean"``: the same layers, parameters and buffers,
     and a last layer on the last scalars alone, not on their mean and deviation."""
-    name = {"edgefieldnet": "edgefieldnet-meanpool", "edgefieldnet-local": "edgefieldnet-local-meanpool"}.get(
-        base, base.replace("edgefieldnet-", "edgefieldnet-meanpool-")
-    )
+    name = {
+        "edgefieldnet": "edgefieldnet-meanpool",
+        "edgefieldnet-local": "edgefieldnet-local-meanpool",
+        "edgefieldnet-nodiv": "edgefieldnet-nodiv-meanpool",
+    }.get(base, base.replace("edgefieldnet-", "edgefieldnet-meanpool-"))
     net, ref = bench.MODELS[name](16, 19, True), bench.MODELS[base](16, 19, True)
     assert (net.pool, ref.pool) == ("mean", "mean_std")
     assert 2 * net.last.in_features == ref.last.in_features
