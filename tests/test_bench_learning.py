@@ -1187,15 +1187,15 @@ def test_report_topology_validation_table_is_that_of_the_saved_runs(bench, psb):
         assert numbers == [sums[k] for k in ("averaged_test_predictions", "test_predictions", "cup", "vase")]
 
 
-def _per_run(runs, model, split, key, seeds=(0, 1, 2)):
+def _per_run(runs, model, split, key, seeds=(0, 1, 2), size=76):
     """The runs of ``model`` on the splits whose name starts with ``split``, of ``seeds``,
-    ordered by ``key``: their keys and their (averaged, final) correct of 76."""
+    ordered by ``key``: their keys and their (averaged, final) correct of ``size``."""
     mine = sorted(
         (r for r in runs if r["model"] == model and r["split"].startswith(split) and r["seed"] in seeds),
         key=key,
     )
     return [key(r) for r in mine], [
-        (round(r["averaged_test_accuracy"] * 76), round(r["test_accuracy"] * 76)) for r in mine
+        (round(r["averaged_test_accuracy"] * size), round(r["test_accuracy"] * size)) for r in mine
     ]
 
 
@@ -1286,6 +1286,32 @@ def test_report_combined_candidate_is_that_of_the_saved_runs():
     row, pairs = _validation_row(runs, "edgefieldnet-local-meanpool")
     assert row in report, row
     assert sum(a for a, _ in pairs) < 200 and "**The combined candidate is rejected**" in report
+
+
+def test_report_nodiv_candidates_are_those_of_the_saved_runs():
+    """The results table of the two networks without the divergence and curl (alone and
+    with DiffusionNet's readout) on both validation splits, and which passes the rule."""
+    report = _joined("benchmarks/results/bench_learning.md")
+    runs = {
+        "topology validation (of 93)": (_saved("bench_learning_topology_validation_runs.json"), 41),
+        "validation (of 228)": (_saved("bench_learning_runs.json"), 200),
+    }
+    passed = []
+    for model in ("edgefieldnet-nodiv", "edgefieldnet-nodiv-meanpool"):
+        ok = True
+        for split, (rs, bound) in runs.items():
+            size = 31 if split.startswith("topology") else 76
+            keys, pairs = _per_run(rs, model, split.split(" (")[0], _seed, size=size)
+            assert keys == [0, 1, 2], (model, split)
+            averaged = sum(a for a, _ in pairs)
+            row = f"| `{model}` | {split} | " + " | ".join(f"{a} / {f}" for a, f in pairs)
+            row += f" | **{averaged}** | {sum(f for _, f in pairs)} | at least {bound} |"
+            assert row in report, row
+            ok = ok and averaged >= bound
+        passed.append(ok)
+    assert passed == [False, True]
+    assert "**`edgefieldnet-nodiv` fails the second part of the rule**" in report
+    assert "**`edgefieldnet-nodiv-meanpool` passes both parts**" in report
 
 
 def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
