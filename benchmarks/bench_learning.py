@@ -119,6 +119,9 @@ MODELS = {
     "edgefieldnet-local-meanpool": _model(models.EdgeFieldNet, logs=True, field_diffusion=False, pool="mean"),
     # DiffusionNet's readout without the divergence and curl of the fields
     "edgefieldnet-nodiv-meanpool": _model(models.EdgeFieldNet, logs=True, divergence=False, pool="mean"),
+    "edgefieldnet-nodiv-meanpool-fixedtime": _model(
+        models.EdgeFieldNet, logs=True, divergence=False, pool="mean", learn_times=False
+    ),
     # dropout on the pooled readout / on the vector stream's features entering the MLPs
     "edgefieldnet-headdrop": _model(models.EdgeFieldNet, logs=True, head_dropout=0.5),
     "edgefieldnet-vecdrop": _model(models.EdgeFieldNet, logs=True, vector_dropout=0.5),

@@ -265,6 +265,21 @@ def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(bench,
     assert layers(net) == layers(ref)
 
 
+def test_the_frozen_time_ablation_differs_from_its_base_by_the_times_only(bench):
+    """``edgefieldnet-nodiv-meanpool-fixedtime`` is ``edgefieldnet-nodiv-meanpool`` with
+    the diffusion times frozen: the same parameters, of which only the times stop
+    learning, initialised alike from one seed."""
+    torch.manual_seed(0)
+    net = bench.MODELS["edgefieldnet-nodiv-meanpool-fixedtime"](16, 19, True)
+    torch.manual_seed(0)
+    ref = bench.MODELS["edgefieldnet-nodiv-meanpool"](16, 19, True)
+    mine, theirs = dict(net.named_parameters()), dict(ref.named_parameters())
+    assert mine.keys() == theirs.keys() and all(torch.equal(w, theirs[k]) for k, w in mine.items())
+    frozen = {k for k, w in mine.items() if not w.requires_grad}
+    assert frozen and all("times" in k for k in frozen)
+    assert all(theirs[k].requires_grad for k in frozen)
+
+
 @pytest.mark.slow
 def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, capsys):
     pytest.importorskip("robust_laplacian")
@@ -1312,6 +1327,15 @@ def test_report_nodiv_candidates_are_those_of_the_saved_runs():
     assert passed == [False, True]
     assert "**`edgefieldnet-nodiv` fails the second part of the rule**" in report
     assert "**`edgefieldnet-nodiv-meanpool` passes both parts**" in report
+    keys, pairs = _per_run(runs["validation (of 228)"][0], "edgefieldnet-nodiv-meanpool", "fixed", _seed)
+    assert keys == [0, 1, 2]
+    phrase = "On the fixed split (seeds 0, 1, 2), correct of 76 with the averaged / final weights: "
+    phrase += ", ".join(f"{a} / {f}" for a, f in pairs[:2]) + f" and {pairs[2][0]} / {pairs[2][1]}. "
+    averaged, final = sum(a for a, _ in pairs), sum(f for _, f in pairs)
+    phrase += f"**{averaged} of 228 ({averaged / 228:.3f}) with the recommended averaged weights: the "
+    phrase += "0.90 target is met, with nothing to spare**; "
+    phrase += f"with the final weights {final} ({final / 228:.3f})."
+    assert averaged >= 0.90 * 228 and phrase in report, phrase
 
 
 def test_readme_meanpool_readout_is_that_of_the_saved_runs(bench):
