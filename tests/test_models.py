@@ -52,6 +52,7 @@ NETWORKS = {
     "edge-meanpool": _small_edge_net(pool="mean"),
     "edge-highpass": _small_edge_net(log_features=True, high_pass=True),
     "edge-local": _small_edge_net(log_features=True, field_diffusion=False),
+    "edge-nodiv-meanpool": _small_edge_net(log_features=True, divergence=False, pool="mean"),
     "edge-dropout": _small_edge_net(vector_dropout=0.5, head_dropout=0.5),
     "edge-fieldread": _small_edge_net(log_features=True, readout_fields=True),
     "edge-vertex-fieldread": _small_edge_net(vector="vertex", readout_fields=True),
