@@ -1389,16 +1389,20 @@ def test_recommended_network_folds_ablations_and_trade_are_those_of_the_saved_ru
     for r in _saved("bench_learning_topology_validation_runs.json"):
         if r["model"] in ("edgefieldnet-nodiv-meanpool", "edgefieldnet"):
             across[r["model"]] += round(r["averaged_test_accuracy"] * 31)
-    scalar, vertex = (
-        _fold_counts(bench, rows, f"edgefieldnet-meanpool-{a}, 4 stretched copies, averaged last 10", 0)
-        for a in ("scalar", "vertexvec")
+    scalar, vertex, frozen = (
+        _fold_counts(bench, rows, f"edgefieldnet-{a}, 4 stretched copies, averaged last 10", 0)
+        for a in ("meanpool-scalar", "meanpool-vertexvec", "nodiv-meanpool-fixedtime")
     )
-    assert all(scalar[k] < mine[0][k] for k in scalar) and len(scalar) == 5
+    assert all(d[k] < mine[0][k] for d in (scalar, frozen) for k in d) and len(scalar) == len(frozen) == 5
     phrase = (
         f"without the vector stream it classifies {sum(scalar.values())} against {sum(mine[0].values())} "
         f"(fewer on all 5 folds), with DiffusionNet's vertex gradients in place of the edge operators "
-        f"{sum(vertex.values())}."
+        f"{sum(vertex.values())}, and with the diffusion times frozen {sum(frozen.values())} (fewer on all "
+        f"5 folds)."
     )
+    assert f"and with its diffusion times frozen too ({sum(frozen.values())})." in _joined("docs/learning.md")
+    frozen_row = ", ".join(str(frozen[f"fold{k}"]) for k in range(5))
+    assert f"| `edgefieldnet-nodiv-meanpool-fixedtime` (times frozen) | {frozen_row} | | | " in report
     readme = _joined("README.md")
     assert phrase in readme, phrase
     phrase = (
