@@ -40,6 +40,18 @@ def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
     assert bench.main(["--table", str(out)]) == saved
 
 
+@pytest.mark.slow
+def test_profile_prints_the_operators_of_ten_training_steps(bench, psb, tmp_path, capsys):
+    argv = ["--quick", "--profile", "--models", "edgefieldnet-nodiv-meanpool", "--threads", "1"]
+    bench.main([*argv, "--cache", str(tmp_path / "cache")])
+    printed = capsys.readouterr().out
+    head, _, profile = printed.partition("one training step of edgefieldnet-nodiv-meanpool (10 steps):")
+    assert profile and "| edgefieldnet-nodiv-meanpool |" in head
+    assert "aten::mm" in profile and "Self CPU time total" in profile
+    (adam,) = [line for line in profile.splitlines() if "Optimizer.step" in line]
+    assert adam.split()[-1] == "10"  # one optimiser step per profiled training step
+
+
 def test_folds_are_stratified_and_cover_every_mesh_once(bench):
     labels = np.repeat(np.arange(5), 20)
     dataset = {"labels": labels, "split": np.zeros(100, dtype=int)}
