@@ -548,7 +548,16 @@ def _train(net, train, epochs, seed=0):
             opt.step()
 
 
-def test_edge_field_net_learns_generated_shapes():
+# The recommended network and the previous recommendation (mean and deviation readout, with
+# the divergence and curl).
+LEARNERS = {
+    "recommended": dict(log_features=True, divergence=False, pool="mean"),
+    "mean-std": dict(log_features=True),
+}
+
+
+@pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
+def test_edge_field_net_learns_generated_shapes(options):
     kinds = ["ellipsoid", "torus", "capsule", "box"]
     rng = np.random.default_rng(0)
     data = []
@@ -559,16 +568,15 @@ def test_edge_field_net_learns_generated_shapes():
     test = data[6::8] + data[7::8]
     train = [b for i, b in enumerate(data) if i % 8 < 6]
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(
-        8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,), log_features=True
-    )
+    net = models.EdgeFieldNet(8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,), **options)
     _train(net, train, epochs=15)
     assert _accuracy(net, test) >= 0.75  # chance: 0.25
     assert _accuracy(net, train) >= 0.75
 
 
 @pytest.mark.slow
-def test_edge_field_net_learns_psb_classes():
+@pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
+def test_edge_field_net_learns_psb_classes(options):
     with np.load(psb_file()) as data:  # each array read once, not once per mesh
         d = {name: data[name] for name in data.files}
     classes = [0, 3, 7, 12]  # human, airplane, table, bird
@@ -579,9 +587,7 @@ def test_edge_field_net_learns_psb_classes():
             v = v.astype(np.float64)
             (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(
-        8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,), log_features=True
-    )
+    net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,), **options)
     _train(net, train, epochs=10)
     assert _accuracy(net, test) >= 0.6  # chance: 0.25
 
