@@ -1517,3 +1517,24 @@ def test_readme_local_fields_on_the_fixed_split_are_those_of_the_saved_runs(benc
         f"against {sum(ours[k] for k in local)})."
     )
     assert docs in _joined("docs/learning.md"), docs
+
+
+def test_report_ablations_of_the_recommended_network_on_seed_1_are_those_of_the_saved_runs():
+    runs = _saved("bench_learning_runs.json")
+    report = (ROOT / "benchmarks/results/bench_learning.md").read_text()
+    section = report[report.index("## The recommended network's ablations on a second seed") :]
+    fold = lambda r: r["split"]  # noqa: E731
+    rows = {
+        "edgefieldnet-nodiv-meanpool": "`edgefieldnet-nodiv-meanpool`, recommended",
+        "edgefieldnet-meanpool-vertexvec": "`edgefieldnet-meanpool-vertexvec` (vertex gradients)",
+        "edgefieldnet-meanpool-scalar": "`edgefieldnet-meanpool-scalar` (no vector stream)",
+    }
+    for model, name in rows.items():
+        folds, counts = _per_run(runs, model, "fold", fold, seeds=(1,))
+        assert folds == [f"fold{k}" for k in range(5)], model
+        _, both = _per_run(runs, model, "fold", fold, seeds=(0, 1))
+        averaged = ", ".join(str(a) for a, _ in counts)
+        total = sum(a for a, _ in counts)
+        final = "" if model == "edgefieldnet-nodiv-meanpool" else f" ({sum(f for _, f in counts)})"
+        row = f"| {name} | {averaged} | {total}{final} | {sum(a for a, _ in both)} |"
+        assert row in section, row
