@@ -167,7 +167,7 @@ AVERAGE_EPOCHS = 10
 #: the row of ``edgefieldnet`` (the previous recommendation) with the recommended recipe
 #: (``--augment 4``, averaged weights; see :func:`label`): the reference of the report's
 #: fold-by-fold comparisons
-RECOMMENDED = f"edgefieldnet, 4 stretched copies, averaged last {AVERAGE_EPOCHS}"
+PAIRED_REFERENCE = f"edgefieldnet, 4 stretched copies, averaged last {AVERAGE_EPOCHS}"
 #: learning-rate schedules: halved every 50 epochs (DiffusionNet's), or a cosine decay to 0
 SCHEDULES = ("step", "cosine")
 

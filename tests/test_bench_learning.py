@@ -420,7 +420,7 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
 def test_report_paired_table_is_that_of_the_saved_runs(bench, capsys):
     """The report's fold-by-fold comparison is what ``--table ... --paired`` prints."""
     runs = ROOT / "benchmarks/results/bench_learning_runs.json"
-    bench.main(["--table", str(runs), "--paired", bench.RECOMMENDED])
+    bench.main(["--table", str(runs), "--paired", bench.PAIRED_REFERENCE])
     printed = capsys.readouterr().out
     paired = printed[printed.index("Against ") :].strip()
     assert paired in (ROOT / "benchmarks/results/bench_learning.md").read_text()
@@ -505,7 +505,7 @@ README_P_VALUES = [
 
 def test_readme_p_values_are_those_of_the_saved_runs(bench):
     """The p-values in the README's reading are those of ``--paired`` on the saved runs,
-    against this release's runs and against the earlier ones (``bench.RECOMMENDED``), on
+    against this release's runs and against the earlier ones (``bench.PAIRED_REFERENCE``), on
     partition 0's folds (``--partitions 0``) or on those of every partition."""
     runs = bench.with_averaged(_saved("bench_learning_runs.json"))
     readme = _joined("README.md")  # lines joined
@@ -514,7 +514,7 @@ def test_readme_p_values_are_those_of_the_saved_runs(bench):
         (reference, partitions): _paired_rows(
             bench.paired_table(
                 runs if partitions is None else bench.in_partitions(runs, partitions),
-                reference or bench.RECOMMENDED,
+                reference or bench.PAIRED_REFERENCE,
             )
         )
         for reference, partitions in {
@@ -1523,16 +1523,16 @@ def test_report_ablations_of_the_recommended_network_on_seed_1_are_those_of_the_
     runs = _saved("bench_learning_runs.json")
     report = (ROOT / "benchmarks/results/bench_learning.md").read_text()
     section = report[report.index("## The recommended network's ablations on a second seed") :]
-    fold = lambda r: r["split"]  # noqa: E731
+    seed_fold = lambda r: (r["seed"], r["split"])  # noqa: E731
     rows = {
         "edgefieldnet-nodiv-meanpool": "`edgefieldnet-nodiv-meanpool`, recommended",
         "edgefieldnet-meanpool-vertexvec": "`edgefieldnet-meanpool-vertexvec` (vertex gradients)",
         "edgefieldnet-meanpool-scalar": "`edgefieldnet-meanpool-scalar` (no vector stream)",
     }
     for model, name in rows.items():
-        folds, counts = _per_run(runs, model, "fold", fold, seeds=(1,))
-        assert folds == [f"fold{k}" for k in range(5)], model
-        _, both = _per_run(runs, model, "fold", fold, seeds=(0, 1))
+        keys, both = _per_run(runs, model, "fold", seed_fold, seeds=(0, 1))
+        assert keys == [(s, f"fold{k}") for s in (0, 1) for k in range(5)], model
+        counts = both[5:]  # seed 1
         averaged = ", ".join(str(a) for a, _ in counts)
         total = sum(a for a, _ in counts)
         final = "" if model == "edgefieldnet-nodiv-meanpool" else f" ({sum(f for _, f in counts)})"
