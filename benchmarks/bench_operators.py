@@ -1,415 +1,312 @@
-"""Assembly, re-assembly, matvec and memory of the edge-based operators.
+"""First assembly, re-assembly and matvec of the edge-based operators, side by side with libigl.
 
 Run from the repository root::
 
-    python benchmarks/bench_operators.py            # spot, icosphere level 6 and level 8
-    python benchmarks/bench_operators.py --quick    # spot and level 6 only (smoke test)
+    python benchmarks/bench_operators.py                 # the default meshes, 1 thread and all
+    python benchmarks/bench_operators.py --threads 1     # one thread only
+    python benchmarks/bench_operators.py --quick         # trimesh's icosphere 6 alone, 5 rounds
+    python benchmarks/bench_operators.py --memory        # also peak RSS at 1.3M faces (icosphere 8)
 
-Each mesh is measured in fresh processes: one for torch_edgevf (whose peak RSS is the
-memory figure) and one for the peers (libigl, scipy). For each mesh it times
+What a user meets: meshes numbered by the tools that made them (:mod:`meshes`: trimesh's
+icosphere 6, a random Delaunay sphere, Spot, an RNA molecular surface; ``ico6`` is
+torch_edgevf's own icosphere, for the earlier tables), the *first* assembly timed from the
+faces (``Topology`` included, nothing cached), and every side on the same threads: a worker
+process per thread count sets ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``,
+``OPENBLAS_NUM_THREADS`` and ``IGL_NUM_THREADS`` (libigl's own thread pool, which ignores
+OpenMP's variable) before any import, and ``torch.set_num_threads``. Each measurement is
+interleaved (ours, libigl, ours, libigl, ...) and the median of the rounds is kept, with
+the process CPU time beside the wall time (on a loaded machine the CPU time of a
+single-threaded side is the steadier figure).
 
-* first assembly of every operator, ``EdgeOperators(v, f)``, topology included;
-* first assembly of ``L_c`` (n = 1) and ``M_z`` alone, ``Topology`` build included;
-* re-assembly for new positions: ``ops.update(v)``, and ``L_c + M_z`` on a cached topology;
-* one product ``L_c @ x`` with a complex128 ``x``: torch COO, torch CSR, scipy CSR;
-* libigl's scalar Crouzeix-Raviart Laplacian + mass (the same sparsity as ``L_c``), with
-  and without its edge map (``igl.unique_edge_map``), and ``cotmatrix + massmatrix``;
+Rows, per mesh and thread count:
 
-and reports medians, the ratios against their targets, and peak RSS.
-Peer packages: ``pip install -r benchmarks/requirements.txt``.
+* first ``L_c`` (n = 1) + ``M_z`` from the faces, against libigl's ``unique_edge_map`` +
+  ``crouzeix_raviart_cotmatrix`` + ``crouzeix_raviart_massmatrix`` (the scalar
+  Crouzeix-Raviart Laplacian, the sparsity of ``L_c``), and the same with the edge map given;
+* first ``EdgeOperators(v, f)`` (every operator);
+* re-assembly of ``L_c + M_z`` for new positions on a cached topology, against one product
+  ``L_c @ x`` (complex128).
+
+Results: ``benchmarks/results/bench_operators.md`` and ``.json`` (``--output``).
+Peer packages: ``pip install -r benchmarks/requirements-peers.txt``.
 """
 
 from __future__ import annotations
 
 import argparse
-import gc
-import itertools
-import logging
+import json
+import os
 import sys
+import time
 from pathlib import Path
 
-import numpy as np
-
-from common import (
-    SHARED_MESHES,
-    PeakMemory,
-    current_rss_bytes,
-    emit,
-    fmt_bytes,
-    fmt_time,
-    load_mesh,
-    machine_info,
-    markdown_table,
-    peak_rss_bytes,
-    run_worker,
-    time_it,
-)
-
-log = logging.getLogger("bench_operators")
-
-ALLOCATOR_ENV = "EDGEVF_BENCH_ALLOCATOR"
+RESULTS = Path(__file__).resolve().parent / "results"
+MESHES = ("trimesh_ico6", "random_sphere", "spot", "rna", "ico6")
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "IGL_NUM_THREADS")
 TARGET_FIRST_VS_IGL = 1.0
 TARGET_UPDATE_VS_MATVEC = 3.0
 TARGET_PEAK_BYTES = 4 * 10**9
-SEED = 0
 
 
-def _import_edgevf():
-    """torch_edgevf, from the environment or, failing that, from this source checkout."""
-    try:
-        import torch_edgevf
-    except ImportError:  # not installed: run against the checkout this script lives in
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-        import torch_edgevf
-    return torch_edgevf
+def timed(fn):
+    """``(wall, cpu)`` seconds of one call of ``fn``; the result is dropped inside."""
+    import gc
+
+    gc.collect()
+    c0, t0 = time.process_time(), time.perf_counter()
+    out = fn()
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    del out
+    return wall, cpu
 
 
-# --------------------------------------------------------------------------- meshes
+def interleaved(fns: dict, rounds: int, warmup: int = 1) -> dict:
+    """``{name: {"wall": [...], "cpu": [...]}}``: the callables run in turn, ``rounds`` times."""
+    out = {name: {"wall": [], "cpu": []} for name in fns}
+    for r in range(warmup + rounds):
+        for name, fn in fns.items():
+            wall, cpu = timed(fn)
+            if r >= warmup:
+                out[name]["wall"].append(wall)
+                out[name]["cpu"].append(cpu)
+    return out
 
 
-def mesh_arrays(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """``(verts float64, faces int64)`` numpy arrays of a named benchmark mesh."""
-    if name.startswith("ico"):
-        ev = _import_edgevf()
-        v, f = ev.icosphere(int(name[3:]))
-        return v.numpy(), f.numpy()
-    _import_edgevf()  # so that load_mesh finds torch_edgevf.io from a plain checkout too
-    path = SHARED_MESHES / f"{name}.obj"
-    if not path.is_file():
-        raise FileNotFoundError(f"benchmark mesh {path} is missing")
-    return load_mesh(path)
-
-
-def perturbed(verts: np.ndarray, scale: float = 1e-3, seed: int = SEED) -> np.ndarray:
-    """Positions moved by a fixed-seed noise (a fraction of the bounding box) for update()."""
-    rng = np.random.default_rng(seed)
-    extent = float(np.ptp(verts, axis=0).max())
-    return verts + scale * extent * rng.standard_normal(verts.shape)
-
-
-def repeats_for(num_faces: int) -> tuple[int, int]:
-    """(repeats of assemblies, repeats of a matvec); fewer on large meshes."""
-    return (7, 30) if num_faces < 500_000 else (3, 10)
-
-
-# --------------------------------------------------------------------------- workers
-
-
-def _maybe_tune_allocator() -> None:
-    """Apply ``torch_edgevf.tune_allocator()`` when the parent asked for ``--allocator tuned``."""
-    import os
-
-    if os.environ.get(ALLOCATOR_ENV) == "tuned" and not _import_edgevf().tune_allocator():
-        raise RuntimeError("--allocator tuned needs glibc (mallopt)")
-
-
-def worker_edgevf(name: str) -> dict:
-    """Time torch_edgevf on one mesh; peak RSS of this process is the memory figure."""
+def worker(names: list[str], rounds: int) -> dict:
+    """Time every mesh in this process (threads set by the parent's environment)."""
+    import igl
+    import numpy as np
     import torch
+    from meshes import mesh
 
-    ev = _import_edgevf()
-    _maybe_tune_allocator()
-    base_rss = current_rss_bytes()
-    v_np, f_np = mesh_arrays(name)
-    v = torch.from_numpy(v_np)
-    f = torch.from_numpy(f_np)
-    # re-assembly gets new positions on every call: torch_edgevf reuses the face geometry of
-    # equal positions (without autograd), which would otherwise turn re-assembly into a cache hit
-    moved = itertools.cycle([torch.from_numpy(perturbed(v_np, seed=SEED + 1 + k)) for k in range(3)])
-    nf = int(f.shape[0])
-    reps, mv_reps = repeats_for(nf)
-    out = {
-        "mesh": name,
-        "faces": nf,
-        "vertices": int(v.shape[0]),
-        "rss_after_load": current_rss_bytes(),
-        "rss_after_import": base_rss,
-        "threads": torch.get_num_threads(),
-    }
-    peaks = {}
+    threads = int(os.environ["OMP_NUM_THREADS"])
+    torch.set_num_threads(threads)
+    import torch_edgevf as ev
 
-    def first_lc_mz():
-        topo = ev.Topology(f, num_vertices=v.shape[0])
-        return ev.connection_laplacian(v, topo, 1), ev.mass_matrix(v, topo)
+    results = {"threads": threads, "torch_threads": torch.get_num_threads(), "meshes": {}}
+    for name in names:
+        v, f = mesh(name)
+        vt, ft = torch.from_numpy(v), torch.from_numpy(f)
+        load0 = os.getloadavg()[0]
 
-    with PeakMemory() as pm:
-        t_first_lc = time_it("first L_c+M_z (+topology)", first_lc_mz, repeats=reps)
-    peaks["first_lc_mz"] = pm.peak
+        def ours():
+            topo = ev.Topology(ft, num_vertices=vt.shape[0])
+            return ev.connection_laplacian(vt, topo, 1), ev.mass_matrix(vt, topo)
 
-    def topology():
-        return ev.Topology(f, num_vertices=v.shape[0])
+        def peer():
+            _, ue, emap = igl.unique_edge_map(f)[:3]
+            return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(
+                v, f, ue, emap
+            )
 
-    t_topo = time_it("Topology build", topology, repeats=reps)
+        _, ue, emap = igl.unique_edge_map(f)[:3]
 
-    with PeakMemory() as pm:
-        t_first_all = time_it("first EdgeOperators", lambda: ev.EdgeOperators(v, f, n=1), repeats=reps)
-    peaks["first_all"] = pm.peak
+        def peer_cached():
+            return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(
+                v, f, ue, emap
+            )
 
-    ops = ev.EdgeOperators(v, f, n=1)
-    topo = ops.topology
-    out["edges"] = topo.num_edges
-    with PeakMemory() as pm:
-        t_update = time_it("update() all", lambda: ops.update(next(moved)), repeats=reps)
-    peaks["update_all"] = pm.peak
+        first = interleaved({"ours": ours, "igl": peer, "igl_cached": peer_cached}, rounds)
+        every = interleaved({"all": lambda: ev.EdgeOperators(vt, ft, n=1)}, max(3, rounds // 2))
+        # re-assembly gets new positions every call (equal positions would be a memo hit)
+        topo = ev.Topology(ft, num_vertices=vt.shape[0])
+        rng = np.random.default_rng(0)
+        extent = float(np.ptp(v, axis=0).max())
+        moved = [torch.from_numpy(v + 1e-3 * extent * rng.standard_normal(v.shape)) for _ in range(3)]
+        state = {"i": 0}
 
-    def update_lc_mz():
-        w = next(moved)
-        return ev.connection_laplacian(w, topo, 1), ev.mass_matrix(w, topo)
+        def update():
+            state["i"] += 1
+            w = moved[state["i"] % 3]
+            return ev.connection_laplacian(w, topo, 1), ev.mass_matrix(w, topo)
 
-    t_update_lc = time_it("re-assembly L_c+M_z", update_lc_mz, repeats=reps)
-    t_update_lc_only = time_it(
-        "re-assembly L_c", lambda: ev.connection_laplacian(next(moved), topo, 1), repeats=reps
-    )
+        lc = ev.connection_laplacian(vt, topo, 1)
+        gen = torch.Generator().manual_seed(0)
+        x = torch.randn(topo.num_edges, dtype=torch.complex128, generator=gen)
+        again = interleaved({"update": update, "matvec": lambda: lc @ x}, rounds)
+        results["meshes"][name] = {
+            "vertices": int(v.shape[0]),
+            "faces": int(f.shape[0]),
+            "edges": topo.num_edges,
+            "load_before": load0,
+            "cr_max_abs_diff": _compare_with_igl(ev, v, f, ue, emap) if f.shape[0] < 500_000 else None,
+            **first,
+            **every,
+            **again,
+        }
+    return results
 
-    lc = ev.connection_laplacian(v, topo, 1)
-    gen = torch.Generator().manual_seed(SEED)
-    x = torch.complex(
-        torch.randn(topo.num_edges, generator=gen, dtype=torch.float64),
-        torch.randn(topo.num_edges, generator=gen, dtype=torch.float64),
-    )
-    t_mv = time_it("matvec torch COO", lambda: lc @ x, repeats=mv_reps, warmup=3)
-    lc_csr = lc.to_sparse_csr()
-    t_mv_csr = time_it("matvec torch CSR", lambda: lc_csr @ x, repeats=mv_reps, warmup=3)
-    out["peak_rss"] = peak_rss_bytes()  # before the scipy copy below
-    out["peak_rss_stages"] = peaks
-    out["hwm_exact"] = pm.exact
+
+def _compare_with_igl(ev, v, f, ue, emap) -> float:
+    """max |L_c^(0) - libigl's CR Laplacian| after matching the edge orders (they agree)."""
+    import igl
+    import numpy as np
+    import torch
 
     from torch_edgevf.linalg import to_scipy
 
-    a = to_scipy(lc)
-    xn = x.numpy()
-    t_mv_scipy = time_it("matvec scipy CSR", lambda: a @ xn, repeats=mv_reps, warmup=3)
-    check = float(np.abs((lc @ x).numpy() - a @ xn).max())
-    out["timings"] = {
-        t.name: t
-        for t in (
-            t_first_lc,
-            t_topo,
-            t_first_all,
-            t_update,
-            t_update_lc,
-            t_update_lc_only,
-            t_mv,
-            t_mv_csr,
-            t_mv_scipy,
-        )
-    }
-    out["matvec_agreement"] = check
-    out["nnz_lc"] = int(lc._nnz())
-    return out
-
-
-def worker_peers(name: str, check: bool) -> dict:
-    """Time libigl on one mesh (and check our scalar L_c^(0) against its CR Laplacian)."""
-    import igl
-
-    _maybe_tune_allocator()
-    v, f = mesh_arrays(name)
-    reps, _ = repeats_for(f.shape[0])
-    out = {"mesh": name, "igl": getattr(igl, "__version__", "?")}
-
-    def cr_first():
-        _, ue, emap = igl.unique_edge_map(f)[:3]
-        return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(v, f, ue, emap)
-
-    _, ue, emap = igl.unique_edge_map(f)[:3]
-
-    def cr_cached():
-        return igl.crouzeix_raviart_cotmatrix(v, f, ue, emap), igl.crouzeix_raviart_massmatrix(v, f, ue, emap)
-
-    def cot():
-        return igl.cotmatrix(v, f), igl.massmatrix(v, f)
-
-    timings = [
-        time_it("igl CR L+M (+edge map)", cr_first, repeats=reps),
-        time_it("igl CR L+M", cr_cached, repeats=reps),
-        time_it("igl edge map", lambda: igl.unique_edge_map(f), repeats=reps),
-        time_it("igl cot L+M", cot, repeats=reps),
-    ]
-    out["timings"] = {t.name: t for t in timings}
-    out["peak_rss"] = peak_rss_bytes()
-    if check:
-        out["cr_max_abs_diff"] = _compare_with_igl(v, f, ue, emap)
-    return out
-
-
-def _compare_with_igl(v, f, ue, emap) -> float:
-    """max |L_c^(0) - igl CR Laplacian| after matching edge orders (they should agree)."""
-    import igl
-    import torch
-
-    ev = _import_edgevf()
     topo = ev.Topology(torch.from_numpy(f), num_vertices=len(v))
-    l0 = ev.connection_laplacian(torch.from_numpy(v), topo, 0)
+    l0 = to_scipy(ev.connection_laplacian(torch.from_numpy(v), topo, 0))
     nv = len(v)
     ours = topo.edges.numpy()
-    key_ours = ours[:, 0] * nv + ours[:, 1]
-    key_igl = ue.min(1) * nv + ue.max(1)
-    perm = np.searchsorted(key_ours, key_igl)
-    from torch_edgevf.linalg import to_scipy
-
-    mine = to_scipy(l0)[perm][:, perm]
-    theirs = igl.crouzeix_raviart_cotmatrix(v, f, ue, emap)
-    return float(abs(mine - theirs).max())
+    perm = np.searchsorted(ours[:, 0] * nv + ours[:, 1], ue.min(1) * nv + ue.max(1))
+    return float(abs(l0[perm][:, perm] - igl.crouzeix_raviart_cotmatrix(v, f, ue, emap)).max())
 
 
-# --------------------------------------------------------------------------- report
+def memory_worker(name: str) -> dict:
+    """Peak RSS of the first ``EdgeOperators(v, f)`` on one mesh, in a process of its own."""
+    import resource
+
+    import torch
+    from meshes import mesh
+
+    import torch_edgevf as ev
+
+    v, f = mesh(name)
+    ops = ev.EdgeOperators(torch.from_numpy(v), torch.from_numpy(f), n=1)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return {"mesh": name, "faces": int(f.shape[0]), "edges": ops.num_edges, "peak_rss": peak}
 
 
-def _median(result: dict, key: str) -> float | None:
-    t = result.get("timings", {}).get(key)
-    return None if t is None else t["median"]
+def run_worker(args: list[str], threads: int) -> dict:
+    import subprocess
+
+    env = {**os.environ, **{k: str(threads) for k in THREAD_VARS}}
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve()), *args], env=env, stdout=subprocess.PIPE, text=True
+    )
+    if proc.returncode != 0:
+        raise RuntimeError(f"worker {args} failed with exit code {proc.returncode}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def report(cases: list[str], results: dict, info: dict) -> str:
-    cols = []
-    for name in cases:
-        ours, peers = results[name]["edgevf"], results[name].get("peers", {})
-        cols.append((name, ours, peers))
+def _median(xs):
+    import statistics
 
-    def row(label, fn):
-        return [label] + [fn(o, p) for _, o, p in cols]
+    return statistics.median(xs)
 
-    def t(key, src="o"):
-        def cell(o, p):
-            timing = (o if src == "o" else p).get("timings", {}).get(key)
-            if timing is None:
-                return "-"
-            return f"{fmt_time(timing['median'])} ({fmt_time(timing['min'])})"
 
-        return cell
+def report(runs: dict, info: dict, memory: dict | None) -> str:
+    from common import fmt_time, markdown_table
 
-    def ratio(num, den, target=None, num_src="o", den_src="p"):
-        def cell(o, p):
-            a = _median(o if num_src == "o" else p, num)
-            b = _median(o if den_src == "o" else p, den)
-            if a is None or b is None:
-                return "-"
-            r = a / b
-            if target is None:
-                return f"{r:.2f}"
-            return f"**{r:.2f}** {'ok' if r <= target else 'MISS'}"
-
-        return cell
-
-    def peak(o, p):
-        value = o.get("peak_rss")
-        mark = "ok" if value is not None and value < TARGET_PEAK_BYTES else "MISS"
-        return f"**{fmt_bytes(value)}** ({value / 1e9:.2f} GB) {mark}" if value is not None else "-"
-
-    headers = ["measurement: median (min)"] + [
-        f"{name} ({o['faces']:,} F, {o['edges']:,} E)" for name, o, _ in cols
-    ]
-    rows = [
-        row("first assembly, all operators `EdgeOperators(v, f)`", t("first EdgeOperators")),
-        row("first assembly, L_c + M_z (Topology included)", t("first L_c+M_z (+topology)")),
-        row("  of which Topology build", t("Topology build")),
-        row("libigl CR Laplacian + mass (+ `unique_edge_map`)", t("igl CR L+M (+edge map)", "p")),
-        row("libigl CR Laplacian + mass (edge map given)", t("igl CR L+M", "p")),
-        row("libigl cotmatrix + massmatrix (reference)", t("igl cot L+M", "p")),
-        row("re-assembly, all operators `ops.update(v)`", t("update() all")),
-        row("re-assembly, L_c + M_z (topology cached)", t("re-assembly L_c+M_z")),
-        row("re-assembly, L_c alone", t("re-assembly L_c")),
-        row("matvec `L_c @ x` complex128, torch COO", t("matvec torch COO")),
-        row("matvec, torch CSR (reference)", t("matvec torch CSR")),
-        row("matvec, scipy CSR (reference)", t("matvec scipy CSR")),
-        row(
-            f"**first L_c+M_z / libigl CR (+edge map)** (target <= {TARGET_FIRST_VS_IGL:g})",
-            ratio("first L_c+M_z (+topology)", "igl CR L+M (+edge map)", TARGET_FIRST_VS_IGL),
-        ),
-        row("first L_c+M_z / libigl CR (edge map given)", ratio("first L_c+M_z (+topology)", "igl CR L+M")),
-        row(
-            f"**re-assembly L_c+M_z / matvec** (target <= {TARGET_UPDATE_VS_MATVEC:g})",
-            ratio("re-assembly L_c+M_z", "matvec torch COO", TARGET_UPDATE_VS_MATVEC, den_src="o"),
-        ),
-        row("re-assembly all / matvec", ratio("update() all", "matvec torch COO", den_src="o")),
-        row("re-assembly L_c+M_z / libigl CR (edge map given)", ratio("re-assembly L_c+M_z", "igl CR L+M")),
-        row(f"**peak RSS, torch_edgevf process** (target < {TARGET_PEAK_BYTES / 1e9:g} GB)", peak),
-        row("  peak in first `EdgeOperators`", lambda o, p: fmt_bytes(o["peak_rss_stages"].get("first_all"))),
-        row("  peak in first L_c + M_z", lambda o, p: fmt_bytes(o["peak_rss_stages"].get("first_lc_mz"))),
-        row("  RSS after imports and mesh", lambda o, p: fmt_bytes(o.get("rss_after_load"))),
-        row("peak RSS, libigl process", lambda o, p: fmt_bytes(p.get("peak_rss"))),
-        row(
-            "L_c^(0) vs libigl CR, max abs diff",
-            lambda o, p: "-" if p.get("cr_max_abs_diff") is None else f"{p['cr_max_abs_diff']:.1e}",
-        ),
-        row("repeats (assembly / matvec)", lambda o, p: "{} / {}".format(*repeats_for(o["faces"]))),
-        row("1-min load average before the run", lambda o, p: f"{o.get('load_before', 0):.1f}"),
-    ]
-    mem = info.get("memory_bytes")
     lines = [
         "## torch_edgevf operator benchmark",
         "",
-        f"Machine: {info['cores']} cores ({info['cpu']}), {fmt_bytes(mem)} RAM, {info['platform']}; "
-        f"load average at start {info.get('load_average')}.",
-        f"torch {info['torch']} ({info.get('torch_threads')} intra-op threads, default), "
-        f"numpy {info['numpy']}, "
-        f"scipy {info['scipy']}, libigl {info.get('igl')}; Python {info['python']}. "
-        "Meshes are float64; `L_c` is n = 1 (complex128). "
-        f"OMP_WAIT_POLICY={info.get('omp_wait_policy')} in the workers (on a shared, loaded machine "
-        "spinning OpenMP threads stall every small parallel op: use PASSIVE there); "
-        f"allocator: {info.get('allocator')} (`tuned` = `torch_edgevf.tune_allocator()` in both workers, "
-        "which lets glibc reuse freed memory instead of faulting fresh pages in).",
+        f"Command: `{info['command']}`",
         "",
-        markdown_table(headers, rows),
+        f"Machine: {info['cores']} cores ({info['cpu']}); torch {info['torch']}, numpy {info['numpy']}, "
+        f"scipy {info['scipy']}, libigl {info['igl']}; Python {info['python']}. "
+        f"1-minute load average {info['load_start']} at the start, {info['load_end']} at the end "
+        f"({info['seconds']:.0f} s). Medians of {info['rounds']} interleaved rounds (ours, libigl, ...); "
+        "wall time, and process CPU time in brackets; ratios are ours / reference. `L_c` is n = 1 "
+        "(complex128), meshes float64. Each thread count runs in a worker of its own with "
+        "`OMP_NUM_THREADS`, `MKL_NUM_THREADS`, `OPENBLAS_NUM_THREADS`, `IGL_NUM_THREADS` and "
+        "`torch.set_num_threads` set to it.",
         "",
-        "Peak RSS is the whole torch_edgevf process (Python, torch, the mesh, every repeat), "
-        "measured with `/proc/self/status` VmHWM per stage and `ru_maxrss` overall.",
     ]
+    for threads, run in runs.items():
+        meshes = run["meshes"]
+        headers = [f"{threads} thread(s): median wall (CPU)"] + [
+            f"{name} ({m['faces']:,} F, {m['edges']:,} E)" for name, m in meshes.items()
+        ]
+
+        def t(key):
+            return [
+                f"{fmt_time(_median(m[key]['wall']))} ({fmt_time(_median(m[key]['cpu']))})"
+                for m in meshes.values()
+            ]
+
+        def ratio(a, b, target=None):
+            cells = []
+            for m in meshes.values():
+                rw = _median(m[a]["wall"]) / _median(m[b]["wall"])
+                rc = _median(m[a]["cpu"]) / _median(m[b]["cpu"])
+                mark = "" if target is None else (" met" if rw <= target else " **missed**")
+                cells.append(f"**{rw:.2f}** ({rc:.2f}){mark}")
+            return cells
+
+        rows = [
+            ["first L_c + M_z (Topology included)", *t("ours")],
+            ["libigl CR Laplacian + mass (+ `unique_edge_map`)", *t("igl")],
+            ["libigl CR Laplacian + mass (edge map given)", *t("igl_cached")],
+            [
+                f"**first L_c + M_z / libigl** (target <= {TARGET_FIRST_VS_IGL:g})",
+                *ratio("ours", "igl", TARGET_FIRST_VS_IGL),
+            ],
+            ["first L_c + M_z / libigl with its edge map given", *ratio("ours", "igl_cached")],
+            ["first `EdgeOperators(v, f)`, every operator", *t("all")],
+            ["re-assembly L_c + M_z (topology cached)", *t("update")],
+            ["one matvec `L_c @ x`, complex128", *t("matvec")],
+            [
+                f"**re-assembly / matvec** (target <= {TARGET_UPDATE_VS_MATVEC:g})",
+                *ratio("update", "matvec", TARGET_UPDATE_VS_MATVEC),
+            ],
+            [
+                "L_c^(0) vs libigl CR, max abs diff",
+                *[
+                    "-" if m["cr_max_abs_diff"] is None else f"{m['cr_max_abs_diff']:.1e}"
+                    for m in meshes.values()
+                ],
+            ],
+            ["1-min load average before the mesh", *[f"{m['load_before']:.1f}" for m in meshes.values()]],
+        ]
+        lines += [markdown_table(headers, rows), ""]
+    if memory:
+        peak = memory["peak_rss"]
+        mark = "met" if peak < TARGET_PEAK_BYTES else "**missed**"
+        lines += [
+            f"Peak RSS of a process that builds `EdgeOperators` of {memory['mesh']} "
+            f"({memory['faces']:,} faces): {peak / 1e9:.2f} GB "
+            f"(target < {TARGET_PEAK_BYTES / 1e9:g} GB, {mark}).",
+            "",
+        ]
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="spot and icosphere level 6 only")
-    parser.add_argument("--worker", choices=["edgevf", "peers"], help=argparse.SUPPRESS)
-    parser.add_argument("--mesh", help=argparse.SUPPRESS)
-    parser.add_argument("--check", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--no-peers", action="store_true", help="skip libigl")
-    parser.add_argument("--output", type=Path, help="also write the markdown report here")
+    parser.add_argument("--meshes", nargs="+", default=list(MESHES), help=f"default: {' '.join(MESHES)}")
     parser.add_argument(
-        "--omp-wait-policy",
-        default="default",
-        help="OMP_WAIT_POLICY of the workers ('default' leaves it unset; PASSIVE on a shared, "
-        "loaded machine)",
+        "--threads", nargs="+", default=["1", "all"], help="thread counts ('all': every core)"
     )
-    parser.add_argument(
-        "--allocator",
-        choices=["default", "tuned"],
-        default="default",
-        help="'tuned' calls torch_edgevf.tune_allocator() in both workers (ours and libigl's)",
-    )
+    parser.add_argument("--rounds", type=int, default=9, help="interleaved rounds per measurement")
+    parser.add_argument("--quick", action="store_true", help="trimesh_ico6 alone, 5 rounds, one thread")
+    parser.add_argument("--memory", action="store_true", help="peak RSS at 1.3M faces (icosphere 8)")
+    parser.add_argument("--output", type=Path, default=RESULTS / "bench_operators.md")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--memory-worker", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
-
-    if args.worker == "edgevf":
-        emit(worker_edgevf(args.mesh))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if args.worker:
+        print(json.dumps(worker(args.meshes, args.rounds)))
         return 0
-    if args.worker == "peers":
-        emit(worker_peers(args.mesh, args.check))
+    if args.memory_worker:
+        print(json.dumps(memory_worker(args.memory_worker)))
         return 0
+    if args.quick:
+        args.meshes, args.rounds, args.threads = ["trimesh_ico6"], 5, ["1"]
+    from common import machine_info
 
-    cases = ["spot", "ico6"] if args.quick else ["spot", "ico6", "ico8"]
-    import torch  # noqa: F401  (machine_info reports its version and thread count)
-
-    info = machine_info()  # load average before the runs
-    env = {} if args.omp_wait_policy.lower() == "default" else {"OMP_WAIT_POLICY": args.omp_wait_policy}
-    info["omp_wait_policy"] = env.get("OMP_WAIT_POLICY", "unset")
-    env[ALLOCATOR_ENV] = info["allocator"] = args.allocator
-    results = {}
-    script = Path(__file__).resolve()
-    for name in cases:
-        results[name] = {"edgevf": run_worker([script, "--worker", "edgevf", "--mesh", name], env=env)}
-        if not args.no_peers:
-            check = ["--check"] if results[name]["edgevf"]["faces"] < 500_000 else []
-            results[name]["peers"] = run_worker(
-                [script, "--worker", "peers", "--mesh", name, *check], env=env
-            )
-        gc.collect()
-    text = report(cases, results, info)
+    info = machine_info()
+    info.update(load_start=round(os.getloadavg()[0], 1), rounds=args.rounds)
+    given = sys.argv[1:] if argv is None else argv
+    info["command"] = " ".join(["python benchmarks/bench_operators.py", *given])
+    t0 = time.perf_counter()
+    runs = {}
+    for spec in args.threads:
+        threads = os.cpu_count() if spec == "all" else int(spec)
+        runs[threads] = run_worker(
+            ["--worker", "--meshes", *args.meshes, "--rounds", str(args.rounds)], threads
+        )
+    memory = run_worker(["--memory-worker", "ico8"], os.cpu_count()) if args.memory else None
+    info.update(load_end=round(os.getloadavg()[0], 1), seconds=time.perf_counter() - t0)
+    text = report(runs, info, memory)
     print(text)
-    if args.output is not None:
-        args.output.write_text(text + "\n")
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(text + "\n")
+    args.output.with_suffix(".json").write_text(
+        json.dumps({"info": info, "runs": runs, "memory": memory}, indent=1)
+    )
     return 0
 
 

@@ -2,7 +2,7 @@
 
 The first ``k`` eigenvalues of ``L f = lambda M_v f`` (``L = G^* M_z^{-1} G``, thesis 4.2,
 with the full vertex mass) are differentiable with respect to the vertex positions
-(:func:`torch_edgevf.losses.spectral_loss`, through :func:`torch_edgevf.linalg.eigsh`).
+(:func:`torch_edgevf.learning.losses.spectral_loss`, through :func:`torch_edgevf.linalg.eigsh`).
 Starting from a slightly perturbed icosphere (the perturbation splits the degenerate
 eigenvalues of the round sphere, whose derivatives do not exist), Adam moves the vertices
 so that the spectrum approaches that of an ellipsoid with the same connectivity (Cosmo
@@ -19,7 +19,7 @@ import time
 import torch
 
 import torch_edgevf as ev
-from torch_edgevf.losses import laplace_beltrami_spectrum, spectral_loss
+from torch_edgevf.learning.losses import laplace_beltrami_spectrum, spectral_loss
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ Data: random ellipsoids (icosphere connectivity, random semi-axes and rotations)
 mesh, the guide is the gradient of the height along a fixed axis, corrupted by strong
 per-edge noise (random rotations and magnitudes). The network (gradient features of the
 vertex inputs, two learned-diffusion blocks on complex edge features,
-:mod:`torch_edgevf.models`) predicts one complex edge field ``z``; the loss is
+:mod:`torch_edgevf.learning.models`) predicts one complex edge field ``z``; the loss is
 
     alignment_loss(z, noisy guide) + beta * smoothness_loss(z)
 
@@ -26,10 +26,10 @@ import torch
 from torch import nn
 
 import torch_edgevf as ev
-from torch_edgevf import data
-from torch_edgevf.losses import alignment_loss, smoothness_loss
-from torch_edgevf.models import EdgeDiffusionBlock
-from torch_edgevf.nn import ComplexLinear, ModulusNorm, gradient_features
+from torch_edgevf.learning import MeshBatch, compute_operators, heat_kernel_signature
+from torch_edgevf.learning.layers import ComplexLinear, ModulusNorm, gradient_features
+from torch_edgevf.learning.losses import alignment_loss, smoothness_loss
+from torch_edgevf.learning.models import EdgeDiffusionBlock
 
 log = logging.getLogger(__name__)
 
@@ -88,12 +88,10 @@ def main(
     for _ in range(num_train + num_test):
         v, f = _mesh(level, g)
         topo, clean, noisy = _guides(v, f, noise, g)
-        ops = data.compute_operators(v, topo, k_edge=24, k_vertex=8)
-        hks = data.heat_kernel_signature(
-            ops.vertex_evals, ops.vertex_evecs, count=4, area=ops.face_area.sum()
-        )
+        ops = compute_operators(v, topo, k_edge=24, k_vertex=8)
+        hks = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=4, area=ops.face_area.sum())
         feats = torch.cat([hks, v], dim=1).float()
-        batch = data.MeshBatch.from_operators(ops.to(torch.float32), feats)
+        batch = MeshBatch.from_operators(ops.to(torch.float32), feats)
         items.append((v.float(), topo, clean.to(torch.complex64), noisy.to(torch.complex64), batch))
     train, test = items[:num_train], items[num_train:]
     net = FieldNet(items[0][4].features.shape[1], width)

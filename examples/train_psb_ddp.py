@@ -1,7 +1,7 @@
 """PSB classification (example ``train_psb.py``) with DistributedDataParallel on CPU.
 
 ``world_size`` processes on this machine (gloo backend, rendezvous on 127.0.0.1 at a free
-port) each train a replica of :class:`~torch_edgevf.models.EdgeFieldNet` on their shard
+port) each train a replica of :class:`~torch_edgevf.learning.models.EdgeFieldNet` on their shard
 of the training set (``DistributedSampler``); DDP averages the gradients, so the replicas
 stay identical. The operators come from the shared on-disk cache, which the parent
 process fills first (entries are written atomically, so concurrent readers are safe).
@@ -30,7 +30,7 @@ import torch
 import torch.distributed as dist
 from torch.nn.parallel import DistributedDataParallel
 
-from torch_edgevf import data
+from torch_edgevf.learning import collate_meshes
 
 log = logging.getLogger(__name__)
 
@@ -61,10 +61,14 @@ def _spawn_workers(world_size: int, args: tuple) -> None:
     import runpy
 
     ctx = multiprocessing.get_context("spawn")
-    procs = [ctx.Process(target=runpy.run_path, args=(str(Path(__file__).resolve()),),
-                         kwargs=dict(init_globals={"_WORKER_ARGS": (rank, world_size) + args},
-                                     run_name="__ddp_worker__"))
-             for rank in range(world_size)]
+    procs = [
+        ctx.Process(
+            target=runpy.run_path,
+            args=(str(Path(__file__).resolve()),),
+            kwargs=dict(init_globals={"_WORKER_ARGS": (rank, world_size) + args}, run_name="__ddp_worker__"),
+        )
+        for rank in range(world_size)
+    ]
     for proc in procs:
         proc.start()
     try:
@@ -87,14 +91,21 @@ def _worker(rank: int, world_size: int, port: int, cfg: dict, out_path: str) -> 
         tp = _train_psb()
         train_set, test_set = tp.load_datasets(cfg["ids"], cfg["k_edge"], cfg["k_vertex"], cfg["cache_dir"])
         torch.manual_seed(cfg["seed"])  # same initial weights on every rank (DDP also broadcasts them)
-        model = tp.make_model(cfg["model"], len(train_set.classes), train_set[0].features.shape[1], cfg["width"],
-                              cfg["num_blocks"])
+        model = tp.make_model(
+            cfg["model"],
+            len(train_set.classes),
+            train_set[0].features.shape[1],
+            cfg["width"],
+            cfg["num_blocks"],
+        )
         ddp = DistributedDataParallel(model)
         opt = torch.optim.AdamW(ddp.parameters(), lr=cfg["lr"], weight_decay=1e-4)
-        sampler = torch.utils.data.distributed.DistributedSampler(train_set, num_replicas=world_size, rank=rank,
-                                                                  shuffle=True, seed=cfg["seed"])
-        loader = torch.utils.data.DataLoader(train_set, batch_size=cfg["batch_size"], sampler=sampler,
-                                             collate_fn=data.collate_meshes)
+        sampler = torch.utils.data.distributed.DistributedSampler(
+            train_set, num_replicas=world_size, rank=rank, shuffle=True, seed=cfg["seed"]
+        )
+        loader = torch.utils.data.DataLoader(
+            train_set, batch_size=cfg["batch_size"], sampler=sampler, collate_fn=collate_meshes
+        )
         steps, losses = 0, []
         start = time.perf_counter()
         for epoch in range(cfg["epochs"]):
@@ -114,12 +125,19 @@ def _worker(rank: int, world_size: int, port: int, cfg: dict, out_path: str) -> 
         # replicas must be identical: compare a checksum of the parameters across ranks
         flat = torch.cat([p.detach().reshape(-1).double() for p in model.parameters()])
         checksums = [torch.zeros(2, dtype=torch.float64) for _ in range(world_size)]
-        dist.all_gather(checksums, torch.stack([flat.sum(), (flat ** 2).sum()]))
+        dist.all_gather(checksums, torch.stack([flat.sum(), (flat**2).sum()]))
         in_sync = all(torch.allclose(c, checksums[0], rtol=1e-6, atol=1e-8) for c in checksums)
         if rank == 0:
-            result = {"world_size": world_size, "steps": steps, "losses": losses, "train_seconds": seconds,
-                      "params_in_sync": bool(in_sync), "test_accuracy": tp.evaluate(model, test_set),
-                      "num_train": len(train_set), "num_test": len(test_set)}
+            result = {
+                "world_size": world_size,
+                "steps": steps,
+                "losses": losses,
+                "train_seconds": seconds,
+                "params_in_sync": bool(in_sync),
+                "test_accuracy": tp.evaluate(model, test_set),
+                "num_train": len(train_set),
+                "num_test": len(test_set),
+            }
             Path(out_path).write_text(json.dumps(result))
         # tear down together: a rank that destroyed its process group while rank 0 (which
         # hosts the TCP store) was still evaluating aborted now and then in gloo's teardown
@@ -129,16 +147,39 @@ def _worker(rank: int, world_size: int, port: int, cfg: dict, out_path: str) -> 
         dist.destroy_process_group()
 
 
-def main(world_size: int = 2, epochs: int = 2, max_steps: int | None = None, model: str = "edge", width: int = 16,
-         num_blocks: int = 2, batch_size: int = 4, lr: float = 3e-3, k_edge: int = 32, k_vertex: int = 32, ids=None,
-         cache_dir=None, seed: int = 0) -> dict:
+def main(
+    world_size: int = 2,
+    epochs: int = 2,
+    max_steps: int | None = None,
+    model: str = "edgefieldnet",
+    width: int = 16,
+    num_blocks: int = 2,
+    batch_size: int = 4,
+    lr: float = 3e-3,
+    k_edge: int = 32,
+    k_vertex: int = 128,
+    ids=None,
+    cache_dir=None,
+    seed: int = 0,
+) -> dict:
     """Train with DDP on ``world_size`` local processes; returns rank 0's results."""
     tp = _train_psb()
     cache_dir = str(tp.default_cache_dir() if cache_dir is None else cache_dir)
     tp.load_datasets(ids, k_edge, k_vertex, cache_dir)  # fill the cache once, in the parent
-    cfg = dict(epochs=epochs, max_steps=max_steps, model=model, width=width, num_blocks=num_blocks,
-               batch_size=batch_size, lr=lr, k_edge=k_edge, k_vertex=k_vertex, ids=None if ids is None else list(ids),
-               cache_dir=cache_dir, seed=seed)
+    cfg = dict(
+        epochs=epochs,
+        max_steps=max_steps,
+        model=model,
+        width=width,
+        num_blocks=num_blocks,
+        batch_size=batch_size,
+        lr=lr,
+        k_edge=k_edge,
+        k_vertex=k_vertex,
+        ids=None if ids is None else list(ids),
+        cache_dir=cache_dir,
+        seed=seed,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         out_path = os.path.join(tmp, "result.json")
         _spawn_workers(world_size, (free_port(), cfg, out_path))
@@ -151,6 +192,8 @@ if __name__ == "__ddp_worker__":  # a spawned rank (see _spawn_workers)
 if __name__ == "__main__":
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     out = main()
-    print(f"DDP x{out['world_size']}: {out['steps']} steps in {out['train_seconds']:.0f} s, "
-          f"loss {out['losses'][0]:.3f} -> {out['losses'][-1]:.3f}, replicas in sync: {out['params_in_sync']}, "
-          f"test accuracy {out['test_accuracy']:.3f}")
+    print(
+        f"DDP x{out['world_size']}: {out['steps']} steps in {out['train_seconds']:.0f} s, "
+        f"loss {out['losses'][0]:.3f} -> {out['losses'][-1]:.3f}, replicas in sync: {out['params_in_sync']}, "
+        f"test accuracy {out['test_accuracy']:.3f}"
+    )

@@ -23,6 +23,8 @@ if os.environ.get("EDGEVF_HIDE_CVXOPT"):  # cvxopt's bundled CHOLMOD never besid
     sys.modules["cvxopt"] = None
     sys.modules["cvxopt.cholmod"] = None
 
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np
@@ -33,6 +35,19 @@ import torch_edgevf as ev
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     torch.set_num_threads(1)
+
+#: the studies' tests: their own lane, collected only when named on the command line
+#: (``pytest tests/experiments``), never by the default lane
+EXPERIMENTS = Path(__file__).resolve().parent / "experiments"
+
+
+def pytest_ignore_collect(collection_path, config):
+    if collection_path != EXPERIMENTS:
+        return None
+    here = Path(config.invocation_params.dir)
+    named = [(here / str(a).split("::")[0]).resolve() for a in config.args]
+    return not any(p == EXPERIMENTS or EXPERIMENTS in p.parents for p in named)
+
 
 #: the real meshes and the PSB file of the data tests (skipped where absent): the folder
 #: ``$TORCH_EDGEVF_TEST_DATA``, else ``shared/`` beside the repository
@@ -161,3 +176,16 @@ def gradcheck(request):
         return torch.autograd.gradcheck(fn, inputs, **kwargs)
 
     return check
+
+
+def edgevf(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+    """``python -m torch_edgevf ARGS`` in a subprocess (one BLAS thread), its output captured."""
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    return subprocess.run(
+        [sys.executable, "-m", "torch_edgevf", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=timeout,
+    )

@@ -1,3 +1,5 @@
+"""``python -m torch_edgevf``: the ``edgevf`` command line; without arguments, the demo."""
+
 import sys
 
 from .cli import main

@@ -44,18 +44,26 @@ def check_face_range(faces, num_vertices: int) -> None:
         raise ValueError(face_range_message(bad, num_vertices))
 
 
+def _tensor(x, kind, name: str, what: str) -> torch.Tensor:
+    """``x`` as a tensor: a tensor as it is, a numpy array of the dtype ``kind``
+    (``np.integer`` or ``np.floating``) without a copy of its data; else ``ValueError``."""
+    if isinstance(x, np.ndarray):
+        if not np.issubdtype(x.dtype, kind):
+            dtype = "an integer" if kind is np.integer else "a floating"
+            raise ValueError(f"{name} must have {dtype} dtype, got numpy {x.dtype}")
+        x = torch.from_numpy(np.ascontiguousarray(x))
+    if not isinstance(x, torch.Tensor):
+        raise ValueError(f"{name} must be {what} tensor, got {type(x).__name__}")
+    return x
+
+
 def as_faces(faces) -> torch.Tensor:
     """Return ``faces`` as a ``(F, 3)`` int64 tensor, or raise ``ValueError``.
 
     Accepts torch tensors and numpy arrays of any integer dtype. Floating point,
     boolean or complex arrays are rejected rather than rounded.
     """
-    if isinstance(faces, np.ndarray):
-        if not np.issubdtype(faces.dtype, np.integer):
-            raise ValueError(f"faces must have an integer dtype, got numpy {faces.dtype}")
-        faces = torch.from_numpy(np.ascontiguousarray(faces))
-    if not isinstance(faces, torch.Tensor):
-        raise ValueError(f"faces must be a (F, 3) integer tensor, got {type(faces).__name__}")
+    faces = _tensor(faces, np.integer, "faces", "a (F, 3) integer")
     if faces.is_floating_point() or faces.is_complex() or faces.dtype == torch.bool:
         raise ValueError(f"faces must have an integer dtype, got {faces.dtype}")
     if faces.dim() != 2 or faces.shape[1] != 3:
@@ -65,22 +73,56 @@ def as_faces(faces) -> torch.Tensor:
     return faces.to(torch.int64)
 
 
+#: the floating dtypes of positions (half precision cannot hold the operators: areas and
+#: squared lengths under- and overflow, and torch has no sparse complex32 kernels)
+FLOAT_DTYPES = (torch.float32, torch.float64)
+
+
+def half_precision_message(dtype, name: str = "verts") -> str:
+    """The message for positions of an unsupported floating dtype (float16, bfloat16, ...)."""
+    how = f"{name}.astype(numpy.float64)" if isinstance(dtype, np.dtype) else f"{name}.double()"
+    return (
+        f"{name} has dtype {dtype}, which is not supported (half precision cannot hold the"
+        f" operators): convert it to float64 (recommended) or float32, e.g. {how}"
+    )
+
+
+def check_positions_dtype(verts, name: str = "verts") -> None:
+    """Raise ``ValueError`` unless a floating tensor or array ``verts`` is float32 or float64."""
+    dtype = verts.dtype
+    if isinstance(verts, torch.Tensor):
+        if verts.is_floating_point() and dtype not in FLOAT_DTYPES:
+            raise ValueError(half_precision_message(dtype, name))
+    elif np.issubdtype(dtype, np.floating) and dtype not in (np.float32, np.float64):
+        raise ValueError(half_precision_message(dtype, name))
+
+
+def check_float_dtype(dtype, name: str = "dtype") -> torch.dtype:
+    """Return ``dtype`` if it is ``torch.float32`` or ``torch.float64``, else raise ``ValueError``."""
+    if not (isinstance(dtype, torch.dtype) and dtype.is_floating_point):
+        raise ValueError(
+            f"{name} must be a floating torch dtype (torch.float32 or torch.float64), got {dtype}"
+        )
+    if dtype not in FLOAT_DTYPES:
+        raise ValueError(f"{name} is {dtype}, which is not supported: use torch.float32 or torch.float64")
+    return dtype
+
+
 def as_verts(verts, dtype: torch.dtype | None = None) -> torch.Tensor:
     """Return ``verts`` as a ``(V, 3)`` floating tensor, or raise ``ValueError``.
 
     Numpy arrays are converted without copying the dtype away (float32 stays
-    float32); integer input is rejected. ``(V, 2)`` planar input is padded with
-    a zero third coordinate. NaN or Inf coordinates raise, naming the vertices.
-    The result keeps the autograd graph of a tensor input.
+    float32); integer and half precision input (float16, bfloat16) is rejected.
+    ``(V, 2)`` planar input is padded with a zero third coordinate. NaN or Inf
+    coordinates raise, naming the vertices. The result keeps the autograd graph of a
+    tensor input.
     """
-    if isinstance(verts, np.ndarray):
-        if not np.issubdtype(verts.dtype, np.floating):
-            raise ValueError(f"verts must have a floating dtype, got numpy {verts.dtype}")
-        verts = torch.from_numpy(np.ascontiguousarray(verts))
-    if not isinstance(verts, torch.Tensor):
-        raise ValueError(f"verts must be a (V, 3) floating tensor, got {type(verts).__name__}")
+    if isinstance(verts, np.ndarray) and np.issubdtype(verts.dtype, np.floating):
+        check_positions_dtype(verts)  # the numpy dtype in the message
+    verts = _tensor(verts, np.floating, "verts", "a (V, 3) floating")
     if not verts.is_floating_point():
         raise ValueError(f"verts must have a floating dtype (float32 or float64), got {verts.dtype}")
+    check_positions_dtype(verts)
     if dtype is not None:
         verts = verts.to(dtype)
     if verts.dim() != 2 or verts.shape[1] not in (2, 3):
@@ -118,6 +160,11 @@ def as_edge_field(z, topo, like: torch.Tensor, name: str = "z") -> torch.Tensor:
     """
     if not isinstance(z, torch.Tensor):
         z = torch.as_tensor(z)
+    elif z.device != like.device:
+        raise ValueError(
+            f"{name} is on {z.device} but the mesh is on {like.device}: move one of them "
+            f"(e.g. {name}.to({str(like.device)!r}))"
+        )
     if z.dim() not in (1, 2) or z.shape[0] != topo.num_edges:
         raise ValueError(
             f"{name} must have shape (E,) or (E, C) with E = {topo.num_edges} edges, got {tuple(z.shape)}"
@@ -131,3 +178,47 @@ def as_edge_field(z, topo, like: torch.Tensor, name: str = "z") -> torch.Tensor:
         bad = torch.nonzero(~torch.isfinite(z.detach()).reshape(z.shape[0], -1).all(1)).flatten().tolist()
         raise ValueError(f"{name} has NaN or Inf values at edges {bad[:10]}")
     return z.to(device=like.device, dtype=target)
+
+
+# --------------------------------------------------------------------------- mesh batches
+
+
+def is_mesh_batch(obj) -> bool:
+    """Whether ``obj`` is a batch of meshes with ``verts_list()`` and ``faces_list()``
+    (a ``pytorch3d.structures.Meshes``, or anything shaped like it)."""
+    return callable(getattr(obj, "verts_list", None)) and callable(getattr(obj, "faces_list", None))
+
+
+def mesh_list(meshes, faces=None) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """The ``(verts, faces)`` of each mesh of a batch with ``verts_list()`` / ``faces_list()``.
+
+    The tensors are those of the batch (on its device); ``faces`` must be left out (the
+    batch holds them). Raises ``ValueError`` for an empty batch or lists of different
+    lengths.
+    """
+    if faces is not None:
+        raise ValueError(
+            f"{type(meshes).__name__} holds its faces: pass it alone, without faces (got faces too)"
+        )
+    verts_list, faces_list = list(meshes.verts_list()), list(meshes.faces_list())
+    if len(verts_list) != len(faces_list):
+        raise ValueError(
+            f"{type(meshes).__name__} has {len(verts_list)} vertex lists but {len(faces_list)} face lists"
+        )
+    if not verts_list:
+        raise ValueError(f"{type(meshes).__name__} holds no mesh")
+    return list(zip(verts_list, faces_list))
+
+
+def single_mesh(verts, faces, what: str):
+    """``(verts, faces)`` as they are, or those of a batch of one mesh (``verts_list()`` /
+    ``faces_list()``); a batch of several raises ``ValueError`` naming ``what`` takes one."""
+    if not is_mesh_batch(verts):
+        return verts, faces
+    meshes = mesh_list(verts, faces)
+    if len(meshes) != 1:
+        raise ValueError(
+            f"{what} takes one mesh, got a {type(verts).__name__} batch of {len(meshes)}: pass one mesh "
+            f"(e.g. meshes[i]) or loop over zip(meshes.verts_list(), meshes.faces_list())"
+        )
+    return meshes[0]

@@ -63,14 +63,21 @@ import numpy as np
 import torch
 
 from .._dtypes import complex_dtype
-from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, list_some
+from .._validation import as_edge_field, as_verts, check_n, check_vertex_count
 from ..linalg import SparseSolver, eigsh, expm_multiply, solve
-from ..mesh.geometry import FaceGeometry, dihedral_angles, edge_lengths, face_geometry
+from ..mesh.geometry import (
+    FaceGeometry,
+    dihedral_angles,
+    edge_lengths,
+    edge_lengths_of,
+    face_geometry_of,
+)
 from ..mesh.topology import Topology
 from ..operators import functional as ops
 from ..operators import kernels
 from ..operators.patterns import Pattern, diagonal, sparse_coo
-from .representation import _as_complex, nth_power
+from .constraints import constraint_plan
+from .powers import nth_power
 
 __all__ = [
     "FieldDesigner",
@@ -147,8 +154,8 @@ class FieldDesigner:
             verts = as_verts(verts)
             topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
             check_vertex_count(verts, topo.num_vertices)
-            geom = face_geometry(verts, topo)
-            self.mean_edge_length = edge_lengths(verts, topo).mean()
+            geom = face_geometry_of(verts, topo)
+            self.mean_edge_length = edge_lengths_of(verts, topo).mean()
         self.topology = topo
         self.verts = verts
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
@@ -199,17 +206,19 @@ class FieldDesigner:
 
     # ------------------------------------------------------------------ smoothest (3.1, 3.3)
 
-    def smoothest(self, return_eigenvalue: bool = False):
+    def smoothest(self, return_eigenvalue: bool = False, *, tol: float | None = None, maxiter: int = 1000):
         """The smoothest ``n``-field: the first eigenvector of ``L_c z = lambda M_z z`` (3.1).
 
         .. math::  z = \\arg\\min_{z^H M_z z = 1} z^H L_c^{(n)} z
+
+        ``tol`` and ``maxiter`` go to :func:`~torch_edgevf.linalg.eigsh`.
 
         Returns
         -------
         z : (E,) complex tensor, ``z^H M_z z = 1``, gauge as in the module docstring
         lambda : scalar tensor, only if ``return_eigenvalue``
         """
-        values, vectors = eigsh(self.laplacian, self.mass, k=1)
+        values, vectors = eigsh(self.laplacian, self.mass, k=1, tol=tol, maxiter=maxiter)
         z = vectors[:, 0]
         return (z, values[0]) if return_eigenvalue else z
 
@@ -226,16 +235,23 @@ class FieldDesigner:
             a = _sum_sparse(parts)
         return a
 
-    def _smoothest_real(self, mu_curl: float, mu_div: float, return_eigenvalue: bool):
+    def _smoothest_real(self, mu_curl: float, mu_div: float, return_eigenvalue: bool, **eigsh_options):
         a = self._real_system(mu_curl, mu_div)
         m2 = torch.cat([self.mass, self.mass])
-        values, vectors = eigsh(a, m2, k=1)
+        values, vectors = eigsh(a, m2, k=1, **eigsh_options)
         x = vectors[:, 0]
         ne = self.num_edges
         z = torch.complex(x[:ne], x[ne:])
         return (z, values[0]) if return_eigenvalue else z
 
-    def curl_free(self, mu: float = 1.0, return_eigenvalue: bool = False):
+    def curl_free(
+        self,
+        mu: float = 1.0,
+        return_eigenvalue: bool = False,
+        *,
+        tol: float | None = None,
+        maxiter: int = 1000,
+    ):
         """The smoothest field penalising curl (thesis 3.3).
 
         Smallest eigenvector of
@@ -248,17 +264,26 @@ class FieldDesigner:
         a small ``mu`` only lifts the global-rotation freedom, a large one drives the curl
         to zero. The sign gauge makes the largest entry of ``x`` positive.
 
+        ``tol`` and ``maxiter`` go to :func:`~torch_edgevf.linalg.eigsh`.
+
         Returns
         -------
         z : (E,) complex tensor, unit ``M_z`` norm (and the eigenvalue if asked)
         """
         mu = _check_real(mu, "mu", 0.0)
-        return self._smoothest_real(mu, 0.0, return_eigenvalue)
+        return self._smoothest_real(mu, 0.0, return_eigenvalue, tol=tol, maxiter=maxiter)
 
-    def div_free(self, mu: float = 1.0, return_eigenvalue: bool = False):
+    def div_free(
+        self,
+        mu: float = 1.0,
+        return_eigenvalue: bool = False,
+        *,
+        tol: float | None = None,
+        maxiter: int = 1000,
+    ):
         """The smoothest field penalising divergence: :meth:`curl_free` with ``L_div`` (3.3)."""
         mu = _check_real(mu, "mu", 0.0)
-        return self._smoothest_real(0.0, mu, return_eigenvalue)
+        return self._smoothest_real(0.0, mu, return_eigenvalue, tol=tol, maxiter=maxiter)
 
     # ------------------------------------------------------------------ constraints (3.4)
 
@@ -312,7 +337,9 @@ class FieldDesigner:
         lam = _check_real(lam, "lam")
         mu_curl = _check_real(mu_curl, "mu_curl", 0.0)
         mu_div = _check_real(mu_div, "mu_div", 0.0)
-        plan = self._constraint_plan(edges, values, direction_edges, directions)
+        plan = constraint_plan(
+            edges, values, direction_edges, directions, self.num_edges, self.verts, self.complex_dtype
+        )
         ne = self.num_edges
         a = self._real_system(mu_curl, mu_div)
         m2 = torch.cat([self.mass, self.mass])
@@ -358,58 +385,6 @@ class FieldDesigner:
             align = (d_unit.conj() * z[d_idx]).real.sum()
             z = torch.where(align.detach() < 0, -z, z)
         return z
-
-    def _constraint_plan(self, edges, values, direction_edges, directions) -> dict:
-        ne, dtype, dev = self.num_edges, self.verts.dtype, self.verts.device
-        e_val, v_val = _check_pairs(edges, values, ne, "edges", "values", self.complex_dtype, dev)
-        e_dir, w_dir = _check_pairs(
-            direction_edges, directions, ne, "direction_edges", "directions", self.complex_dtype, dev
-        )
-        e_val, v_val = _dedupe(e_val, v_val, "values")
-        e_dir, w_dir = _dedupe(e_dir, w_dir, "directions", parallel=True)
-        zero = torch.nonzero(w_dir.detach().abs() == 0).flatten().tolist()
-        if zero:
-            raise ValueError(
-                f"directions must be nonzero (a zero guide has no direction) at direction_edges "
-                f"[{list_some(e_dir[zero].tolist())}]"
-            )
-        both = np.intersect1d(e_val.cpu().numpy(), e_dir.cpu().numpy())
-        if both.size:
-            raise ValueError(
-                "contradictory constraints: edges given both a value and a direction "
-                f"[{list_some(both.tolist())}]; give the value only"
-            )
-        kind = torch.zeros(ne, dtype=torch.int64, device=dev)  # 0 free, 1 value, 2 direction
-        kind[e_val] = 1
-        kind[e_dir] = 2
-        free = torch.nonzero(kind == 0).flatten()
-        nf, nd = free.numel(), e_dir.numel()
-        m = 2 * nf + nd
-        if m == 0:
-            raise ValueError(f"the constraints fix all {ne} edges: no free unknown is left to design")
-        ar_f = torch.arange(nf, device=dev)
-        ar_d = torch.arange(nd, device=dev) + 2 * nf
-        unit = w_dir / w_dir.abs()
-        rows = torch.cat([free, free + ne, e_dir, e_dir + ne])
-        cols = torch.cat([ar_f, ar_f + nf, ar_d, ar_d])
-        coef = torch.cat(
-            [torch.ones(2 * nf, dtype=dtype, device=dev), unit.real.to(dtype), unit.imag.to(dtype)]
-        )
-        x_fixed = torch.zeros(2 * ne, dtype=dtype, device=dev)
-        if e_val.numel():
-            x_fixed = x_fixed.index_put((e_val,), v_val.real.to(dtype)).index_put(
-                (e_val + ne,), v_val.imag.to(dtype)
-            )
-        return {
-            "rows": rows,
-            "cols": cols,
-            "coef": coef,
-            "x_fixed": x_fixed,
-            "m": m,
-            "has_values": bool(e_val.numel()),
-            "direction_edges": e_dir,
-            "direction_units": unit,
-        }
 
     # ------------------------------------------------------------------ soft alignment (3.4)
 
@@ -605,56 +580,12 @@ def _sum_sparse(parts) -> torch.Tensor:
     return sparse_coo(torch.stack([uniq // shape[1], uniq % shape[1]]), out, shape)
 
 
-def _check_pairs(edges, values, ne: int, e_name: str, v_name: str, cdtype, dev):
-    if (edges is None) != (values is None):
-        raise ValueError(f"{e_name} and {v_name} must be given together")
-    if edges is None:
-        return (torch.zeros(0, dtype=torch.int64, device=dev), torch.zeros(0, dtype=cdtype, device=dev))
-    edges = torch.as_tensor(edges, device=dev)
-    if edges.is_floating_point() or edges.is_complex() or edges.dtype == torch.bool:
-        raise ValueError(f"{e_name} must be an integer tensor, got {edges.dtype}")
-    edges = edges.to(torch.int64).reshape(-1)
-    bad = torch.nonzero((edges < 0) | (edges >= ne)).flatten()
-    if bad.numel():
-        raise ValueError(f"{e_name} out of range (the mesh has {ne} edges): {list_some(edges[bad].tolist())}")
-    values = _as_complex(torch.as_tensor(values, device=dev), v_name)
-    if values.shape != edges.shape:
-        raise ValueError(
-            f"{v_name} must have one value per edge of {e_name}: shape {tuple(edges.shape)}, "
-            f"got {tuple(values.shape)}"
-        )
-    if not bool(torch.isfinite(values.detach()).all()):
-        raise ValueError(f"{v_name} has NaN or Inf values")
-    if values.dtype != cdtype:
-        values = values.to(cdtype)
-    return edges, values.to(dev)
-
-
-def _dedupe(edges: torch.Tensor, values: torch.Tensor, name: str, parallel: bool = False):
-    """Drop repeated edges with equal (or, for directions, parallel) values; raise otherwise."""
-    if edges.numel() == 0:
-        return edges, values
-    uniq, inverse = torch.unique(edges, return_inverse=True)
-    if uniq.numel() == edges.numel():
-        return edges, values
-    first = torch.full((uniq.numel(),), edges.numel(), dtype=torch.int64, device=edges.device)
-    first = first.scatter_reduce(0, inverse, torch.arange(edges.numel(), device=edges.device), reduce="amin")
-    ref = values[first][inverse].detach()
-    v = values.detach()
-    if parallel:
-        clash = (ref.real * v.imag - ref.imag * v.real).abs() > 1e-12 * (ref.abs() * v.abs() + 1e-300)
-    else:
-        clash = (ref - v).abs() > 1e-12 * (ref.abs() + v.abs() + 1e-300)
-    if bool(clash.any()):
-        bad = torch.unique(edges[clash]).tolist()
-        raise ValueError(f"contradictory constraints: edges given two different {name} [{list_some(bad)}]")
-    return edges[first], values[first]
-
-
 # ---------------------------------------------------------------------- one-off functions
 
 
-def smoothest_field(verts, faces, n: int = 1) -> torch.Tensor:
+def smoothest_field(
+    verts, faces, n: int = 1, *, tol: float | None = None, maxiter: int = 1000
+) -> torch.Tensor:
     """The smoothest ``n``-direction field of a mesh (thesis 3.1).
 
     The eigenvector of the smallest eigenvalue of ``L_c^(n) z = lambda M_z z``, with
@@ -666,13 +597,14 @@ def smoothest_field(verts, faces, n: int = 1) -> torch.Tensor:
     verts : (V, 3) float tensor, or a :class:`~torch_edgevf.mesh.geometry.FaceGeometry`
     faces : (F, 3) integer tensor or Topology
     n : int >= 1
+    tol, maxiter : see :func:`torch_edgevf.linalg.eigsh`
 
     Returns
     -------
     (E,) complex tensor: the representation vector (take
     :func:`~torch_edgevf.fields.nth_root` for one of the ``n`` directions).
     """
-    return FieldDesigner(verts, faces, n).smoothest()
+    return FieldDesigner(verts, faces, n).smoothest(tol=tol, maxiter=maxiter)
 
 
 def curl_free_field(verts, faces, mu: float = 1.0, n: int = 1) -> torch.Tensor:

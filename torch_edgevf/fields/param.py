@@ -86,7 +86,7 @@ class CutGraph:
     cut_edges: np.ndarray
 
 
-def _dual_tree(topo: Topology):
+def dual_tree(topo: Topology):
     ef = topo.edge_faces.numpy()
     interior = (ef >= 0).all(1)
     ei = np.flatnonzero(interior)
@@ -114,7 +114,7 @@ def _dual_tree(topo: Topology):
     return parent, parent_edge, order, tree
 
 
-def _prune(topo: Topology, cut: np.ndarray, keep_vertex: np.ndarray) -> np.ndarray:
+def prune_cut(topo: Topology, cut: np.ndarray, keep_vertex: np.ndarray) -> np.ndarray:
     """Remove dangling cut edges whose free end is not a vertex in ``keep_vertex``.
 
     Boundary edges count in the degrees (so cuts reaching the boundary stay) but are never
@@ -157,13 +157,13 @@ def cut_graph(verts, faces, keep_vertices=None) -> CutGraph:
         singularities); ``None`` prunes to the homology generators only.
     """
     verts, topo = topology_and_verts(verts, faces)
-    parent, parent_edge, order, tree = _dual_tree(topo)
+    parent, parent_edge, order, tree = dual_tree(topo)
     interior = ~topo.boundary_edges.numpy()
     cut = interior & ~tree
     keep = np.zeros(topo.num_vertices, dtype=bool)
     if keep_vertices is not None:
         keep[np.asarray(keep_vertices)] = True
-    return CutGraph(parent, parent_edge, order, tree, _prune(topo, cut, keep))
+    return CutGraph(parent, parent_edge, order, tree, prune_cut(topo, cut, keep))
 
 
 # --------------------------------------------------------------------------- combing
@@ -354,7 +354,7 @@ class Parametrization:
     face_angle: torch.Tensor | None = None
 
 
-def _face_plane(verts: np.ndarray, faces: np.ndarray, theta0_dir: np.ndarray):
+def face_plane(verts: np.ndarray, faces: np.ndarray, theta0_dir: np.ndarray):
     """Per-face 2D corner coordinates in the frame whose x axis is ``theta0_dir``."""
     p = verts[faces]
     n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
@@ -434,14 +434,14 @@ def parametrize(
     s = 1.0 / (2 * h) if scale is None else float(scale)
 
     # step 3: cut and comb; keep detected singular vertices and vertices of non-trivial holonomy
-    parent, parent_edge, order, tree = _dual_tree(topo)
+    parent, parent_edge, order, tree = dual_tree(topo)
     base = CutGraph(parent, parent_edge, order, tree, np.zeros(topo.num_edges, dtype=bool))
     cmb = comb(verts, topo, z, base)
     keep = np.zeros(topo.num_vertices, dtype=bool)
     keep[sing.singular_vertices.numpy()] = True
     keep |= cmb.holonomy != 0
     interior = ~topo.boundary_edges.numpy()
-    cut = _prune(topo, interior & ~tree, keep)
+    cut = prune_cut(topo, interior & ~tree, keep)
     log.info("cut graph: %d edges, %d kept vertices", int(cut.sum()), int(keep.sum()))
 
     # step 4: unknowns per cut-mesh vertex (corners merged across non-cut interior edges)
@@ -465,7 +465,7 @@ def parametrize(
     d0 = vnp[fl[:, 2]] - vnp[fl[:, 1]]
     d0 *= topo.face_edge_signs.numpy()[:, :1]
     d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
-    P = _face_plane(vnp, fl, d0)
+    P = face_plane(vnp, fl, d0)
     area = 0.5 * np.abs(P[:, 1, 0] * P[:, 2, 1] - P[:, 1, 1] * P[:, 2, 0])
     # hat gradients: grad lambda_k = rot90(P_{k+2} - P_{k+1}) / (2A)
     e = P[:, [2, 0, 1]] - P[:, [1, 2, 0]]

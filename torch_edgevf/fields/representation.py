@@ -5,7 +5,8 @@ midpoint of edge ``e = (i, j)``, ``i < j``, in the frame ``X_e = (v_j - v_i) / |
 (``Y_e`` is ``X_e`` turned by +90 degrees about the surface normal, so
 ``psi = Re(z) X_e + Im(z) Y_e``). An ``n``-direction field is stored by its
 *representation vector*, the angle-based ``n``-th power of one of its directions
-(thesis 2.2): :func:`nth_power` and :func:`nth_root`.
+(thesis 2.2): :func:`~torch_edgevf.fields.powers.nth_power` and
+:func:`~torch_edgevf.fields.powers.nth_root`.
 
 Frames used here (all right-handed about the outward normal, ``Y = N x X``):
 
@@ -40,13 +41,18 @@ import torch
 
 from .._dtypes import complex_dtype
 from .._validation import as_edge_field, check_n, list_some
-from ..mesh.geometry import FaceGeometry, face_geometry, face_normals, topology_and_verts, vertex_normals
+from ..mesh.geometry import (
+    FaceGeometry,
+    face_geometry,
+    face_geometry_of,
+    face_normals,
+    topology_and_verts,
+    vertex_normals,
+)
 from ..mesh.topology import Topology
+from .powers import _as_complex, nth_roots
 
 __all__ = [
-    "nth_power",
-    "nth_root",
-    "nth_roots",
     "face_frames",
     "edge_frames",
     "vertex_frames",
@@ -71,82 +77,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-# --------------------------------------------------------------------------- n-th powers
-
-
-def _as_complex(z, name: str = "z") -> torch.Tensor:
-    if not isinstance(z, torch.Tensor):
-        z = torch.as_tensor(z)
-    if z.is_complex():
-        return z
-    if z.is_floating_point():
-        return z.to(complex_dtype(z.dtype))
-    raise ValueError(f"{name} must be a complex or floating tensor, got {z.dtype}")
-
-
-def _unit(z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(|z|, z / |z|)`` with ``z / |z| = 1`` where ``z = 0`` (gradients stay finite)."""
-    r = z.abs()
-    safe = torch.where(r > 0, r, torch.ones_like(r))
-    return r, torch.where(r > 0, z / safe, torch.ones_like(z))
-
-
-def nth_power(u, n: int) -> torch.Tensor:
-    """The angle-based ``n``-th power ``z = |u| e^{i n arg(u)}`` (thesis 2.2).
-
-    Unlike the ordinary power used by Knoeppel et al. (2013), the norm is preserved, so a
-    field and its representation vector have the same magnitude.
-
-    Parameters
-    ----------
-    u : complex tensor of any shape
-    n : int >= 1
-
-    Returns
-    -------
-    complex tensor of the same shape; ``0`` where ``u = 0``.
-    """
-    n = check_n(n)
-    u = _as_complex(u, "u")
-    r, unit = _unit(u)
-    return r * unit**n
-
-
-def nth_root(z, n: int) -> torch.Tensor:
-    """The principal angle-based ``n``-th root ``|z| e^{i arg(z) / n}`` (thesis 2.2).
-
-    ``nth_power(nth_root(z, n), n) == z``; the root of a representation vector is one of
-    the ``n`` directions of the ``n``-direction field (:func:`nth_roots` gives all).
-
-    Parameters
-    ----------
-    z : complex tensor of any shape
-    n : int >= 1
-
-    Returns
-    -------
-    complex tensor of the same shape, with ``arg`` in ``(-pi/n, pi/n]``.
-    """
-    n = check_n(n)
-    z = _as_complex(z)
-    return torch.polar(z.abs(), torch.angle(z) / n)
-
-
-def nth_roots(z, n: int) -> torch.Tensor:
-    """All ``n`` angle-based ``n``-th roots ``|z| e^{i (arg z + 2 pi k) / n}``, ``k < n``.
-
-    Returns
-    -------
-    complex tensor of shape ``z.shape + (n,)``.
-    """
-    n = check_n(n)
-    z = _as_complex(z)
-    real = z.real.dtype
-    k = torch.arange(n, device=z.device, dtype=real)
-    phase = (torch.angle(z)[..., None] + 2 * math.pi * k) / n
-    return torch.polar(z.abs()[..., None].expand(phase.shape), phase)
 
 
 # --------------------------------------------------------------------------- frames
@@ -276,7 +206,7 @@ def interpolate(verts, topo, z, face_index, bary, n: int = 1) -> torch.Tensor:
 
     with ``b`` the barycentric coordinates of ``p`` and ``u_k`` from
     :func:`face_edge_coefficients`. For ``n > 1``, ``z`` is a representation vector and so
-    is the result (take :func:`nth_root`, or use :func:`point_directions`).
+    is the result (take :func:`~torch_edgevf.fields.powers.nth_root`, or use :func:`point_directions`).
 
     Parameters
     ----------
@@ -291,13 +221,18 @@ def interpolate(verts, topo, z, face_index, bary, n: int = 1) -> torch.Tensor:
     -------
     (P,) complex tensor.
     """
-    n = check_n(n)
-    verts, topo = topology_and_verts(verts, topo)
-    z = _edge_vector(z, topo, verts)
+    verts, topo, z, n = _field_of(verts, topo, z, n)
     face_index, bary = _check_points(face_index, bary, topo, verts)
-    u = _face_edge_coefficients(face_geometry(verts, topo), topo, n)[face_index]
+    u = _face_edge_coefficients(face_geometry_of(verts, topo), topo, n)[face_index]
     fe = topo.face_edges.to(verts.device)[face_index]
     return ((1 - 2 * bary).to(u.dtype) * u * z[fe]).sum(1)
+
+
+def _field_of(verts, topo, z, n: int):
+    """The checked arguments of a function of one edge field: ``(verts, topo, z, n)``."""
+    n = check_n(n)
+    verts, topo = topology_and_verts(verts, topo)
+    return verts, topo, _edge_vector(z, topo, verts), n
 
 
 def _edge_vector(z, topo: Topology, verts: torch.Tensor, name: str = "z") -> torch.Tensor:
@@ -319,10 +254,8 @@ def face_values(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (F,) complex tensor.
     """
-    n = check_n(n)
-    verts, topo = topology_and_verts(verts, topo)
-    z = _edge_vector(z, topo, verts)
-    u = _face_edge_coefficients(face_geometry(verts, topo), topo, n)
+    verts, topo, z, n = _field_of(verts, topo, z, n)
+    u = _face_edge_coefficients(face_geometry_of(verts, topo), topo, n)
     return (u * z[topo.face_edges.to(verts.device)]).sum(1) / 3
 
 
@@ -404,9 +337,7 @@ def edge_directions(verts, topo, z, n: int) -> torch.Tensor:
     (E, n, 3) tensor: ``nth_roots(z, n)`` drawn in the edge frames; direction ``k`` is
     direction 0 turned by ``2 pi k / n``.
     """
-    n = check_n(n)
-    verts, topo = topology_and_verts(verts, topo)
-    z = _edge_vector(z, topo, verts)
+    verts, topo, z, n = _field_of(verts, topo, z, n)
     x, y, _ = edge_frames(verts, topo)
     return _directions(x, y, z, n)
 
@@ -619,9 +550,7 @@ def edges_to_vertices(verts, topo, z, n: int = 1) -> torch.Tensor:
     -------
     (V,) complex tensor.
     """
-    n = check_n(n)
-    verts, topo = topology_and_verts(verts, topo)
-    z = _edge_vector(z, topo, verts)
+    verts, topo, z, n = _field_of(verts, topo, z, n)
     pv, pe, r = _vertex_transport(verts, topo, n)
     acc = z.new_zeros(topo.num_vertices).index_add(0, pv, r.conj() * z[pe])
     count = torch.bincount(pv, minlength=topo.num_vertices).to(verts.dtype)

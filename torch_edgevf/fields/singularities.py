@@ -75,8 +75,9 @@ import torch
 from .._validation import as_edge_field, check_n
 from ..mesh.geometry import (
     FaceGeometry,
-    angle_defects,
+    angle_defects_of,
     face_geometry,
+    face_geometry_of,
     face_normals,
     pair_transport,
     topology_and_verts,
@@ -196,24 +197,7 @@ def _geometry(verts, topo):
         return geom, topo, geom
     verts, topo = topology_and_verts(verts, topo)
     verts = verts.detach()
-    return verts, topo, face_geometry(verts, topo)
-
-
-def _angle_defects(verts, topo, geom: FaceGeometry) -> torch.Tensor:
-    """:func:`angle_defects`, also for a geometry standing in for the positions."""
-    if not isinstance(verts, FaceGeometry):
-        return angle_defects(verts, topo)
-    faces = topo.faces.to(geom.device)
-    total = geom.lengths.new_zeros(topo.num_vertices).index_add(0, faces.flatten(), geom.angles.flatten())
-    full = torch.where(
-        topo.boundary_vertices.to(geom.device),
-        torch.full_like(total, math.pi),
-        torch.full_like(total, 2 * math.pi),
-    )
-    defect = full - total
-    if topo.unreferenced_vertices.numel():
-        defect = defect.index_fill(0, topo.unreferenced_vertices.to(geom.device), 0.0)
-    return defect
+    return verts, topo, face_geometry_of(verts, topo)
 
 
 def face_rotations(verts, topo, z, n: int = 1) -> torch.Tensor:
@@ -281,7 +265,7 @@ def singularities(verts, faces, z, n: int = 1, boundary: str = "round") -> Singu
         fl = topo.faces.to(dev)
         two_pi = 2 * math.pi
         face_turn = omega.sum(1) / two_pi
-        defect = _angle_defects(verts, topo, geom).to(torch.float64)
+        defect = angle_defects_of(geom, topo).to(torch.float64)
         vsum = torch.zeros(topo.num_vertices, dtype=torch.float64, device=dev).index_add(
             0, fl.flatten(), omega.flatten()
         )

@@ -79,21 +79,15 @@ def random_warp(
 
     Parameters
     ----------
-    verts : (N, 3) array or tensor; not changed (a new array or tensor of its type and
-        dtype is returned)
+    verts, unit_sphere : as for :func:`random_stretch`
     rng : numpy.random.Generator; the draws (waves x 3 normals for the directions, as
         many for the displacements, then the phases) decide the warp
-    strain : float in [0, 1)
-    waves : int, at least 1
-    wavelength : float, positive
-    unit_sphere : bool
+    strain : float in [0, 1); waves : int, at least 1; wavelength : float, positive
 
     Example
     -------
-    >>> import numpy as np
-    >>> import torch_edgevf as ev
-    >>> from torch_edgevf.learning.augment import random_warp
-    >>> v, f = ev.icosphere(2)
+    >>> from torch_edgevf import icosphere
+    >>> v = icosphere(2)[0]
     >>> w = random_warp(v, np.random.default_rng(0), strain=0.2)
     >>> bool(((w - v).norm(dim=1) > 0.01).any()), round(float(w.norm(dim=1).max()), 12)
     (True, 1.0)

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .._validation import as_faces, as_verts
+from .._validation import as_faces, as_verts, is_mesh_batch, mesh_list
 from .._version import __version__
 from ..mesh.topology import Topology
 from .precompute import MeshOperators, compute_operators
@@ -36,8 +36,10 @@ __all__ = ["COMPUTATION", "OperatorCache"]
 #: whenever a fix changes the operators of some mesh, so that entries computed before it
 #: are rebuilt even where the package version is unchanged. 2: ``eigsh`` raises where it
 #: returned pairs that are no eigenpairs (a pencil it cannot resolve: a cap face's
-#: cotangent weight of ``1e13``); entries of 1 may hold those pairs.
-COMPUTATION = 2
+#: cotangent weight of ``1e13``); entries of 1 may hold those pairs. 3: meshes with
+#: zero-area faces get the operators of their mollified edge lengths, where they raised
+#: (recorded failures of 2 are tried again).
+COMPUTATION = 3
 
 _SPARSE_FIELDS = ("gradient", "connection_laplacian", "vertex_gradient")
 
@@ -75,17 +77,24 @@ def _from_arrays(arrays: dict) -> MeshOperators:
                     kwargs[f.name] = None
                     continue
                 raise KeyError(f"{f.name}.indices")
-            idx = torch.from_numpy(arrays[f"{f.name}.indices"].astype(np.int64))
+            raw = arrays[f"{f.name}.indices"].astype(np.int64)
             shape = tuple(int(s) for s in arrays[f"{f.name}.shape"])
-            if (
-                idx.dim() != 2
-                or idx.shape[0] != 2
-                or (idx.numel() and (idx.min() < 0 or idx[0].max() >= shape[0] or idx[1].max() >= shape[1]))
-            ):
-                raise ValueError(f"{f.name}: indices out of range")
+            if raw.ndim != 2 or raw.shape[0] != 2:
+                raise ValueError(f"{f.name}: indices of shape {raw.shape}, expected (2, nnz)")
+            if raw.size:
+                if raw.min() < 0 or raw[0].max() >= shape[0] or raw[1].max() >= shape[1]:
+                    raise ValueError(f"{f.name}: indices out of range")
+                # entries are written coalesced: sorted row-major without repeats
+                key = raw[0] * shape[1] + raw[1]
+                if (np.diff(key) <= 0).any():
+                    raise ValueError(f"{f.name}: indices not sorted (not written by this cache)")
             kwargs[f.name] = torch.sparse_coo_tensor(
-                idx, torch.from_numpy(arrays[f"{f.name}.values"]), shape, check_invariants=False
-            ).coalesce()
+                torch.from_numpy(raw),
+                torch.from_numpy(arrays[f"{f.name}.values"]),
+                shape,
+                is_coalesced=True,
+                check_invariants=False,
+            )
         else:
             kwargs[f.name] = torch.from_numpy(arrays[f.name])
     return MeshOperators(**kwargs)  # type: ignore[arg-type]  # types checked by out.check()
@@ -233,12 +242,26 @@ class OperatorCache:
         logger.warning("operator cache failure record %s does not apply (%s); removed it", path.name, reason)
         return None
 
-    def get(self, verts, faces, **options) -> MeshOperators:
+    def get(self, verts, faces=None, device=None, **options):
         """Load the entry of a mesh, or compute (:func:`compute_operators`) and store it.
+
+        The entry is returned on ``device``, by default the device of ``verts`` (the CPU
+        for arrays); entries are computed and stored on the CPU. A batch of meshes with
+        ``verts_list()`` / ``faces_list()`` (a ``pytorch3d.structures.Meshes``; ``faces``
+        left out) gives a list, one entry per mesh.
 
         Raises the recorded ``ValueError`` at once for a mesh whose operators raised before
         (see the class docstring), and records a new one.
         """
+        if is_mesh_batch(verts):
+            return [self.get(v, f, device=device, **options) for v, f in mesh_list(verts, faces)]
+        if faces is None:
+            raise ValueError("OperatorCache.get needs faces (or a batch of meshes with faces_list())")
+        if device is None:
+            device = verts.device if isinstance(verts, torch.Tensor) else torch.device("cpu")
+        return self._get(verts, faces, **options).to(device)
+
+    def _get(self, verts, faces, **options) -> MeshOperators:
         key = self.key(verts, faces, **options)
         out = self.load(key)
         if out is None:
@@ -249,7 +272,7 @@ class OperatorCache:
                     "remove that file to compute again)"
                 )
             try:
-                out = compute_operators(verts, faces, **options)
+                out = compute_operators(verts, faces, device="cpu", **options)
             except ValueError as exc:
                 self.record_failure(key, exc)
                 raise

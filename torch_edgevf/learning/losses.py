@@ -21,7 +21,7 @@ from __future__ import annotations
 import torch
 
 from .._validation import as_edge_field, as_verts
-from ..fields.representation import nth_power
+from ..fields.powers import nth_power
 from ..linalg import eigsh
 from ..mesh.geometry import face_areas, topology_and_verts
 from ..operators.functional import (

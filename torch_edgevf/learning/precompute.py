@@ -9,16 +9,20 @@ the batches of :mod:`torch_edgevf.learning.batching`.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, fields
+from typing import Any, Protocol, overload
 
 import numpy as np
 import scipy.sparse as sp
 import torch
 
+from .._device import check_devices, move, parse_to
 from .._dtypes import complex_dtype
-from .._validation import as_verts
+from .._validation import as_verts, is_mesh_batch, mesh_list, single_mesh
 from ..linalg import eigsh
-from ..mesh.geometry import face_areas, face_normals, vertex_normals
+from ..mesh.geometry import FaceGeometry, edge_lengths, face_areas, vertex_normals
+from ..mesh.repair import find_degenerate_faces, mollify_lengths
 from ..mesh.topology import Topology
 from ..operators import functional as ops
 from .layers import spectral_diffusion
@@ -81,6 +85,51 @@ class MeshFields:
         return int(self.verts.shape[0])
 
     @property
+    def device(self) -> torch.device:
+        """The device of the tensors (that of ``verts``)."""
+        return self.verts.device
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The real dtype of the tensors (that of ``verts``); complex ones are its complex dtype."""
+        return self.verts.dtype
+
+    def to(self, *args, **kwargs):
+        """A copy on another device and/or in another precision, as ``Tensor.to``.
+
+        ``to(device)``, ``to(dtype)``, ``to(device, dtype)``, ``to(other_tensor)`` and the
+        keywords ``device=``, ``dtype=``, ``non_blocking=``. Every tensor moves, the sparse
+        ones included; real tensors take ``dtype`` (float32 or float64), complex ones the
+        complex dtype of the same precision, integer ones keep theirs. The object itself
+        is not changed.
+        """
+        device, dtype, non_blocking = parse_to(*args, **kwargs)
+        new = copy.copy(self)
+        for f in fields(self):
+            setattr(new, f.name, move(getattr(self, f.name), device, dtype, non_blocking))
+        new._moved_from(self)
+        return new
+
+    def _moved_from(self, source) -> None:
+        """Called on the result of :meth:`to` (a shallow copy of ``source``)."""
+
+    def float(self):
+        """:meth:`to` ``torch.float32`` (complex tensors: ``complex64``)."""
+        return self.to(torch.float32)
+
+    def double(self):
+        """:meth:`to` ``torch.float64`` (complex tensors: ``complex128``)."""
+        return self.to(torch.float64)
+
+    def cpu(self):
+        """:meth:`to` the CPU."""
+        return self.to("cpu")
+
+    def tensors(self) -> dict[str, torch.Tensor]:
+        """The tensors of the object by field name (the sparse ones included; None left out)."""
+        return {f.name: x for f in fields(self) if isinstance(x := getattr(self, f.name), torch.Tensor)}
+
+    @property
     def num_edges(self) -> int:
         return int(self.edges.shape[0])
 
@@ -119,10 +168,6 @@ class MeshOperators(MeshFields):
 
     n: int = 1
 
-    def to(self, dtype: torch.dtype) -> MeshOperators:
-        """A copy with real tensors in ``dtype`` and complex ones in the matching complex dtype."""
-        return MeshOperators(**{f.name: _convert(getattr(self, f.name), dtype) for f in fields(self)})
-
     def check(self) -> None:
         """Raise ``ValueError`` if the shapes are inconsistent."""
         V, E, F = self.num_vertices, self.num_edges, self.num_faces
@@ -151,17 +196,7 @@ class MeshOperators(MeshFields):
             raise ValueError("MeshOperators has out-of-range indices")
 
 
-def _convert(x, dtype: torch.dtype):
-    if not isinstance(x, torch.Tensor):
-        return x
-    if x.is_complex():
-        return x.to(complex_dtype(dtype))
-    if x.is_floating_point():
-        return x.to(dtype)
-    return x
-
-
-def vertex_gradient_operator(verts, faces) -> torch.Tensor:
+def vertex_gradient_operator(verts, faces=None) -> torch.Tensor:
     r"""Least-squares tangent-plane gradient at vertices, complex (the DiffusionNet scheme).
 
     Each vertex gets a tangent frame ``(x_i, y_i)`` (``x_i`` the projection of its first
@@ -175,15 +210,14 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     -------
     (V, V) complex sparse tensor ``D`` with ``g = D f``.
     """
+    verts, faces = single_mesh(verts, faces, "vertex_gradient_operator")
     verts = as_verts(verts).detach()
     topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
-    v = verts.to(torch.float64).numpy()
+    v = verts.to(torch.float64).cpu().numpy()
     f = topo.faces.numpy()
     e = topo.edges.numpy()
-    fn = (
-        face_normals(verts.to(torch.float64), topo).numpy()
-        * face_areas(verts.to(torch.float64), topo).numpy()[:, None]
-    )
+    # area-weighted face normals (twice the area; zero for a collapsed face)
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     normal = np.zeros_like(v)
     np.add.at(normal, f.ravel(), np.repeat(fn, 3, axis=0))
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
@@ -200,7 +234,10 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     a = np.stack([(d * x[src]).sum(1), (d * y[src]).sum(1)], axis=1)  # (2E, 2)
     N = np.zeros((v.shape[0], 2, 2))
     np.add.at(N, src, a[:, :, None] * a[:, None, :])
-    scale = np.trace(N, axis1=1, axis2=2)[:, None, None]
+    # regularised relative to each vertex's own scale, floored for a vertex whose
+    # neighbours all coincide with it (a decimator can leave such vertices)
+    floor = 1e-12 * float(np.mean((d * d).sum(1)))
+    scale = np.maximum(np.trace(N, axis1=1, axis2=2), floor)[:, None, None]
     N += 1e-8 * scale * np.eye(2)
     c = np.einsum("eij,ej->ei", np.linalg.inv(N)[src], a)
     cz = c[:, 0] + 1j * c[:, 1]
@@ -210,9 +247,11 @@ def vertex_gradient_operator(verts, faces) -> torch.Tensor:
     D = sp.coo_matrix((vals, (rows, cols)), shape=(v.shape[0],) * 2).tocsr().tocoo()
     cdtype = complex_dtype(verts.dtype)
     idx = torch.from_numpy(np.stack([D.row, D.col]).astype(np.int64))
-    return torch.sparse_coo_tensor(
-        idx, torch.from_numpy(D.data).to(cdtype), D.shape, check_invariants=False
-    ).coalesce()
+    return (
+        torch.sparse_coo_tensor(idx, torch.from_numpy(D.data).to(cdtype), D.shape, check_invariants=False)
+        .coalesce()
+        .to(verts.device)
+    )
 
 
 def robust_vertex_laplacian(verts, topo: Topology, mollify_factor: float = 1e-5):
@@ -237,9 +276,27 @@ def robust_vertex_laplacian(verts, topo: Topology, mollify_factor: float = 1e-5)
     return Lt, torch.as_tensor(np.asarray(M.diagonal(), dtype=np.float64))
 
 
+class MeshesLike(Protocol):
+    """A batch of meshes as ``pytorch3d.structures.Meshes`` holds one (or anything alike)."""
+
+    def verts_list(self) -> list: ...
+
+    def faces_list(self) -> list: ...
+
+
+@overload
+def compute_operators(
+    verts: MeshesLike, faces: None = None, *args: Any, **kwargs: Any
+) -> list[MeshOperators]: ...
+
+
+@overload
+def compute_operators(verts: Any, faces: Any, *args: Any, **kwargs: Any) -> MeshOperators: ...
+
+
 def compute_operators(
     verts,
-    faces,
+    faces=None,
     n: int = 1,
     k_edge: int = 32,
     k_vertex: int = 32,
@@ -247,12 +304,19 @@ def compute_operators(
     vertex_gradient: bool = False,
     tol: float | None = None,
     dtype: torch.dtype = torch.float64,
-) -> MeshOperators:
+    device=None,
+):
     """Compute the :class:`MeshOperators` of a mesh (in float64, then returned in ``dtype``).
+
+    The computation runs on the CPU (SciPy and torch); the result is returned on
+    ``device``, by default the device of ``verts`` (the CPU for arrays).
 
     Parameters
     ----------
-    verts : (V, 3) float tensor or array
+    verts : (V, 3) float tensor or array, or a batch of meshes
+        A batch with ``verts_list()`` and ``faces_list()`` (a
+        ``pytorch3d.structures.Meshes``; then ``faces`` is left out) gives a list of
+        :class:`MeshOperators`, one per mesh, each on the device of its vertices.
     faces : (F, 3) int tensor or array, or a Topology
     n : int >= 1, symmetry order of ``L_c``
     k_edge, k_vertex : int, numbers of eigenpairs of ``(L_c, M_z)`` and of the vertex
@@ -274,29 +338,55 @@ def compute_operators(
         Dtype of the real tensors returned (complex ones in the matching complex dtype);
         everything is computed in float64 first. Use ``torch.float32`` for networks in
         single precision (the models check that batch and parameters agree).
+    device : torch.device or str, optional
+        Where the result is returned (default: the device of ``verts``).
     """
+    options = dict(
+        n=n,
+        k_edge=k_edge,
+        k_vertex=k_vertex,
+        vertex_laplacian=vertex_laplacian,
+        vertex_gradient=vertex_gradient,
+        tol=tol,
+        dtype=dtype,
+        device=device,
+    )
+    if is_mesh_batch(verts):
+        return [compute_operators(v, f, **options) for v, f in mesh_list(verts, faces)]
+    if faces is None:
+        raise ValueError("compute_operators needs faces (or a batch of meshes with faces_list())")
+    return _compute_operators(verts, faces, **options)
+
+
+def _compute_operators(
+    verts, faces, n, k_edge, k_vertex, vertex_laplacian, vertex_gradient, tol, dtype, device
+) -> MeshOperators:
+    """:func:`compute_operators` of one mesh."""
     if dtype not in (torch.float32, torch.float64):
         raise ValueError(f"dtype must be torch.float32 or torch.float64, got {dtype!r}")
     if vertex_laplacian not in ("cotan", "edge", "robust"):
         raise ValueError(f"vertex_laplacian must be 'cotan', 'edge' or 'robust', got {vertex_laplacian!r}")
     if not isinstance(n, int) or isinstance(n, bool) or n < 1:
         raise ValueError(f"n must be an integer >= 1, got {n!r}")
-    verts = as_verts(verts).detach().to(torch.float64)
+    verts = as_verts(verts).detach()
+    device = verts.device if device is None else torch.device(device)
+    verts = verts.to(device="cpu", dtype=torch.float64)
     topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
     ne, nv = topo.num_edges, topo.num_vertices
     for name, k, size in (("k_edge", k_edge, ne), ("k_vertex", k_vertex, nv)):
         if not isinstance(k, int) or not 1 <= k < size:
             raise ValueError(f"{name} must be an integer in [1, {size - 1}], got {k!r}")
-    edge_mass = ops.mass_matrix(verts, topo).values()
-    Lc = ops.connection_laplacian(verts, topo, n)
+    geometry = _intrinsic_geometry(verts, topo)
+    edge_mass = ops.mass_matrix(geometry, topo).values()
+    Lc = ops.connection_laplacian(geometry, topo, n)
     if vertex_laplacian == "robust":
         Lv, vmass = robust_vertex_laplacian(verts, topo)
     else:
-        vmass = ops.vertex_mass(verts, topo, lumped=True).values()
+        vmass = ops.vertex_mass(geometry, topo, lumped=True).values()
         Lv = (
-            ops.cotan_laplacian(verts, topo)
+            ops.cotan_laplacian(geometry, topo)
             if vertex_laplacian == "cotan"
-            else ops.laplace_beltrami(verts, topo)
+            else ops.laplace_beltrami(geometry, topo)
         )
     with torch.no_grad():
         edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
@@ -312,8 +402,8 @@ def compute_operators(
         face_edges=topo.face_edges.clone(),
         edge_mass=edge_mass,
         vertex_mass=vmass,
-        face_area=face_areas(verts, topo),
-        gradient=ops.gradient(verts, topo).coalesce(),
+        face_area=geometry.area if isinstance(geometry, FaceGeometry) else face_areas(verts, topo),
+        gradient=ops.gradient(geometry, topo).coalesce(),
         connection_laplacian=Lc.coalesce(),
         edge_evals=ew,
         edge_evecs=ev.contiguous(),
@@ -322,15 +412,31 @@ def compute_operators(
         vertex_gradient=vertex_gradient_operator(verts, topo) if vertex_gradient else None,
         n=n,
     )
-    return out if dtype == torch.float64 else out.to(dtype)
+    return out.to(device, dtype)
 
 
-def _signature_times(times, count: int, dtype: torch.dtype) -> torch.Tensor:
+def _intrinsic_geometry(verts: torch.Tensor, topo: Topology):
+    """The positions, or where some face has zero area, the intrinsic geometry of the
+    mollified edge lengths (:func:`~torch_edgevf.mesh.repair.mollify_lengths`, as the
+    robust Laplacian of Sharp and Crane 2020 does): the operators of a real mesh with
+    collapsed faces (a decimator leaves them) are then finite, and those of every other
+    mesh unchanged."""
+    if len(find_degenerate_faces(verts.numpy(), topo.faces.numpy())) == 0:
+        return verts
+    lengths, _, _ = mollify_lengths(edge_lengths(verts, topo), topo.face_edges)
+    return FaceGeometry.from_lengths(lengths[topo.face_edges])
+
+
+def _signature_times(times, count: int, dtype: torch.dtype, device) -> torch.Tensor:
     """The diffusion times of the signatures: ``times``, or ``count`` log-spaced in ``[1e-2, 1]``."""
-    return torch.logspace(-2, 0, count, dtype=dtype) if times is None else torch.as_tensor(times, dtype=dtype)
+    if times is None:
+        return torch.logspace(-2, 0, count, dtype=dtype, device=device)
+    return torch.as_tensor(times, dtype=dtype, device=device)
 
 
-def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) -> torch.Tensor:
+def heat_kernel_signature(
+    evals, evecs, times=None, count: int = 16, area=None, log: bool = False
+) -> torch.Tensor:
     r"""Heat kernel signature per vertex, scale normalised (intrinsic input features).
 
     .. math::  h(x, t) = A \sum_i e^{-\lambda_i A t} \phi_i(x)^2
@@ -345,19 +451,41 @@ def heat_kernel_signature(evals, evecs, times=None, count: int = 16, area=None) 
     evecs : (V, k) real tensor
     times : (T,) tensor, default ``logspace(-2, 0, count)``
     area : float or tensor, total surface area (default 1)
+    log : bool
+        Return ``log h``: the signatures span orders of magnitude over their times and
+        between the tips and the bodies of shapes, and the logarithm makes those ratios
+        differences a linear layer can use. The input of the recommended
+        :class:`~torch_edgevf.learning.models.EdgeFieldNet`.
 
     Returns
     -------
     (V, T) tensor.
+
+    Raises
+    ------
+    ValueError
+        ``log=True`` and a signature is not positive (the constant mode's term alone is
+        positive: the eigenpairs are then wrong).
     """
     if evecs.dim() != 2 or evals.shape != (evecs.shape[1],):
         raise ValueError(
             f"evals (k,) and evecs (V, k) do not match: {tuple(evals.shape)}, {tuple(evecs.shape)}"
         )
-    times = _signature_times(times, count, evals.dtype)
-    area = torch.as_tensor(1.0 if area is None else area, dtype=evals.dtype)
+    check_devices(evals=evals, evecs=evecs)
+    times = _signature_times(times, count, evals.dtype, evals.device)
+    area = torch.as_tensor(1.0 if area is None else area, dtype=evals.dtype, device=evals.device)
     weights = torch.exp(-evals[None, :] * area * times[:, None])  # (T, k)
-    return area * (evecs**2) @ weights.transpose(0, 1)
+    h = area * (evecs**2) @ weights.transpose(0, 1)
+    if not log:
+        return h
+    bad = ~(h.detach() > 0)
+    if bool(bad.any()):
+        v, c = (int(i) for i in bad.nonzero()[0])
+        raise ValueError(
+            f"log=True needs positive heat kernel signatures, got {float(h[v, c])} at vertex {v}, "
+            f"time {c} (check the eigenpairs: the constant mode alone gives a positive value)"
+        )
+    return torch.log(h)
 
 
 def mean_curvature_signature(
@@ -406,15 +534,16 @@ def mean_curvature_signature(
         raise ValueError(f"mass must be ({verts.shape[0]},) and positive, got shape {tuple(mass.shape)}")
     if not isinstance(count, int) or isinstance(count, bool) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
+    check_devices(verts=verts, evals=evals, evecs=evecs, mass=mass)
     dtype = evecs.dtype
     x, m = verts.to(torch.float64), mass.to(torch.float64)
     normal_curvature = (ops.cotan_laplacian(x, topo) @ x) / (2 * m[:, None])
     h = (normal_curvature * vertex_normals(x, topo)).sum(1)
-    if topo.is_closed and torch.linalg.det(x[topo.faces]).sum() < 0:
+    if topo.is_closed and torch.linalg.det(x[topo.faces.to(x.device)]).sum() < 0:
         h = -h  # a closed mesh with inward-facing faces: the outward normal is the other one
     area = face_areas(x, topo).sum()
     h = h * torch.sqrt(area / (4 * torch.pi))
-    times = _signature_times(times, count, torch.float64)
+    times = _signature_times(times, count, torch.float64, x.device)
     lam, phi = evals.to(torch.float64), evecs.to(torch.float64)
     diffused = spectral_diffusion(h[:, None].expand(-1, times.shape[0]), lam, phi, m, area * times)
     out = torch.cat([h[:, None], diffused], dim=1)

@@ -44,7 +44,7 @@ import numpy as np
 import torch
 
 from .._dtypes import real_dtype
-from . import lanczos
+from . import components, shift_invert
 from ._utils import (
     SparseData,
     as_matrix_pair,
@@ -54,7 +54,7 @@ from ._utils import (
     to_numpy,
 )
 from .factor import factorize
-from .lanczos import METHODS, default_shift
+from .shift_invert import METHODS, default_shift
 
 logger = logging.getLogger(__name__)
 #: A_ii / M_ii this many times the median marks rows of an ill-conditioned pencil
@@ -83,7 +83,7 @@ def _to_input(grad, values):
 
 def _unreliable_message(A, M, e) -> str:
     """Why the eigenpairs are not returned, and the rows to look at when one is to blame."""
-    ratio = lanczos.diagonal_ratio(A, M)
+    ratio = shift_invert.diagonal_ratio(A, M)
     median = float(np.median(ratio)) if ratio.size else 0.0
     msg = f"eigsh: {e}; the eigenpairs would be wrong, so none are returned"
     if median > 0 and ratio.max() > _ILL_CONDITIONED * median:
@@ -95,7 +95,7 @@ def _unreliable_message(A, M, e) -> str:
             "intrinsic Delaunay Laplacian"
         )
     else:
-        msg += "; raise maxiter or tol"
+        msg += "; raise maxiter or tol (arguments of eigsh, smoothest_field and FieldDesigner.smoothest)"
     return msg
 
 
@@ -140,43 +140,53 @@ def _complement_solve(A, M, X, lam, R, precond, tol, maxiter):
     return W
 
 
+class _SolveOptions(NamedTuple):
+    """The options of :func:`eigsh` that the forward pass takes (no gradient)."""
+
+    k: int
+    sigma: float | None
+    method: str
+    tol: float
+    maxiter: int | None
+    ncv: int | None
+    v0: object
+    degeneracy_rtol: float
+    block_size: int | None
+
+
 class _Eigsh(torch.autograd.Function):
     @staticmethod
     @blas_single_thread
-    def forward(
-        ctx,
-        a_values,
-        m_values,
-        a_data,
-        m_data,
-        k,
-        sigma,
-        method,
-        tol,
-        maxiter,
-        ncv,
-        v0,
-        degeneracy_rtol,
-        block_size,
-    ):
+    def forward(ctx, a_values, m_values, a_data, m_data, options: _SolveOptions):
+        k, sigma, method, tol, maxiter, ncv, v0, degeneracy_rtol, block_size = options
         A = a_data.to_scipy()
         M = m_data.to_scipy().astype(A.real.dtype)
         # the pencil divided by powers of two (exact): the same numbers at every scale
-        A, M, scaling = lanczos.normalize_pair(A, M)
+        A, M, scaling = shift_invert.normalize_pair(A, M)
         sigma = default_shift(A, M) if sigma is None else scaling.normalized_shift(sigma)
         ctx.factor = None
         if method == "auto":
-            method = "dense" if lanczos.dense_is_faster(A.shape[0], k) else "lanczos"
+            method = "dense" if shift_invert.dense_is_faster(A.shape[0], k) else "lanczos"
         try:
+            rows = None if method == "dense" else components.blocks(A, M)
             if method == "dense":
-                lam, X = lanczos.eig_dense(A, M, k)
+                lam, X = shift_invert.eig_dense(A, M, k)
+            elif rows is not None:  # independent blocks (a mesh in pieces): one solve each
+                lam, X = components.eigsh_by_blocks(
+                    A, M, sigma, k, rows, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
+                )
+                if lam.size < k:
+                    raise ValueError(
+                        f"eigsh: k = {k} eigenpairs asked for, but the pencil has {lam.size}: "
+                        f"{A.shape[0] - sum(r.size for r in rows)} rows have no mass"
+                    )
             else:
-                lam, X, ctx.factor = lanczos.shift_invert_eigsh(
+                lam, X, ctx.factor = shift_invert.shift_invert_eigsh(
                     A, M, sigma, k, tol=tol, maxiter=maxiter, ncv=ncv, v0=v0, block_size=block_size
                 )
-        except lanczos.Unreliable as e:
+        except shift_invert.Unreliable as e:
             raise ValueError(_unreliable_message(A, M, e)) from None
-        lam, X = scaling.values(lam), scaling.vectors(lanczos.fix_phase(X))
+        lam, X = scaling.values(lam), scaling.vectors(shift_invert.fix_phase(X))
         # the backward's complement solve runs on the normalised pair too
         ctx.A, ctx.M, ctx.sigma, ctx.degeneracy_rtol = A, M, sigma, degeneracy_rtol
         ctx.scaling = scaling
@@ -204,7 +214,7 @@ class _Eigsh(torch.autograd.Function):
         if ctx.needs_input_grad[1]:
             left = -U * lam.to(X.dtype) - 0.5 * X * norm_term.to(X.dtype)
             grad_m = _pattern_outer(left, X, ctx.m_data).real.to(ctx.m_data.dtype)
-        return (grad_a, grad_m) + (None,) * 11
+        return grad_a, grad_m, None, None, None
 
 
 def _phase_corrected(X: torch.Tensor, G: torch.Tensor) -> torch.Tensor:
@@ -249,7 +259,7 @@ def _complement_adjoint(ctx, lam, X, G):
     n, k = X.shape
     if k >= n:
         return torch.zeros_like(X)
-    # on the normalised pair A = 2^a A', M = 2^m M' (lanczos.PairScaling): with X = 2^(-m/2) X'
+    # on the normalised pair A = 2^a A', M = 2^m M' (shift_invert.PairScaling): with X = 2^(-m/2) X'
     # and lam = 2^(a - m) lam', (A - lam_i M) w_i = r_i is 2^a (A' - lam'_i M') w_i = r_i
     # and M X X^H = M' X' X'^H, so w_i = 2^-a w'_i; r is divided by a power of two too,
     # so that the CG's inner products neither under- nor overflow
@@ -258,7 +268,7 @@ def _complement_adjoint(ctx, lam, X, G):
     lam_n = scaling.normalized_values(to_numpy(lam))
     Gn = to_numpy(G)
     R = Gn - (M @ Xn) @ (Xn.conj().T @ Gn)
-    r_exp = lanczos.binary_exponent(float(np.max(np.abs(R)))) if R.size else 0
+    r_exp = shift_invert.binary_exponent(float(np.max(np.abs(R)))) if R.size else 0
     if ctx.factor is None:
         ctx.factor = factorize((A - ctx.sigma * M).tocsc(), "auto", hermitian=True, many_solves=True)
     eps = float(np.finfo(A.dtype).eps)
@@ -267,12 +277,12 @@ def _complement_adjoint(ctx, lam, X, G):
         M,
         Xn,
         lam_n,
-        lanczos.ldexp(R, -r_exp),
+        shift_invert.ldexp(R, -r_exp),
         ctx.factor.solve,
         tol=max(1e-12, 10 * eps),
         maxiter=max(100, min(n, 1000)),
     )
-    return from_numpy(lanczos.ldexp(W, r_exp - scaling.a_exp), X, X.dtype)
+    return from_numpy(shift_invert.ldexp(W, r_exp - scaling.a_exp), X, X.dtype)
 
 
 # ------------------------------------------------------------------------------ public
@@ -348,19 +358,6 @@ def eigsh(
     eps = float(torch.finfo(a_data.dtype).eps)
     tol = (1e-13 if eps < 1e-10 else 1e-6) if tol is None else tol
     degeneracy_rtol = eps**0.5 if degeneracy_rtol is None else degeneracy_rtol
-    lam, X = _Eigsh.apply(
-        a_data.values,
-        m_data.values,
-        a_data,
-        m_data,
-        k,
-        sigma,
-        method,
-        tol,
-        maxiter,
-        ncv,
-        v0,
-        degeneracy_rtol,
-        block_size,
-    )
+    options = _SolveOptions(k, sigma, method, tol, maxiter, ncv, v0, degeneracy_rtol, block_size)
+    lam, X = _Eigsh.apply(a_data.values, m_data.values, a_data, m_data, options)
     return EigenPairs(lam, X)

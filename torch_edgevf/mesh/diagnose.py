@@ -359,19 +359,12 @@ def find_t_junctions(verts, faces, tol: float = COINCIDENT_TOL) -> np.ndarray:
 
     Parameters
     ----------
-    verts : (V, 3) float tensor or array (finite)
-    faces : (F, 3) integer tensor or array
-    tol : float in [0, 1), default :data:`COINCIDENT_TOL`
+    verts, faces, tol : as for :func:`find_coincident_vertices`
 
     Returns
     -------
     (K, 4) int64 array of rows ``(vertex, a, b, face)``, ``a < b``, ordered by face, then
-    edge, then distance from ``a``
-
-    Raises
-    ------
-    ValueError
-        Wrong shapes or dtypes, NaN coordinates, indices out of range, or a bad ``tol``.
+    edge, then distance from ``a``; ``ValueError`` as :func:`find_coincident_vertices`
     """
     tol = _check_tol(tol)
     v, f = _as_arrays(verts, faces)

@@ -31,8 +31,6 @@ from scipy.sparse.csgraph import connected_components
 
 from .._validation import as_faces, list_some
 
-__all__ = ["Topology", "remove_unreferenced_vertices"]
-
 __all__ = ["Topology", "remove_unreferenced_vertices", "unique_pairs", "DerivedKey"]
 
 _T = TypeVar("_T")
@@ -102,39 +100,68 @@ class Topology:
         it = _work_dtype(nv, nf)
         fi = f.astype(it)
 
-        src, dst = fi[:, _NEXT], fi[:, _PREV]  # the half-edge opposite each corner
-        negative = src > dst  # runs from the higher to the lower index: side 1
-        keys, face_edges = unique_pairs(
-            np.minimum(src, dst).ravel(), np.maximum(src, dst).ravel(), nv, index_dtype=it
-        )
+        # the half-edge opposite each corner c = 3 f + k runs from corner k + 1 to k + 2;
+        # sorted by (edge, side), side 1 for a run from the higher to the lower index
+        src, dst = fi[:, _NEXT].ravel(), fi[:, _PREV].ravel()
+        negative = src > dst
+        keys, side, corner = _sorted_half_edges(src, dst, negative, nv, it)
         del src, dst
-        ne = keys.shape[0]
+        nc = keys.shape[0]
+        new = np.empty(nc, dtype=bool)
+        new[0] = True
+        np.not_equal(keys[1:], keys[:-1], out=new[1:])
+        face_edges = np.empty(nc, dtype=it)
+        across = np.empty(nc, dtype=it)  # the corner across the edge opposite each corner, -1 if none
+        first, second = corner[0::2], corner[1::2]
+        if (
+            nc % 2 == 0
+            and new[0::2].all()
+            and not new[1::2].any()
+            and not side[0::2].any()
+            and side[1::2].all()
+        ):  # closed, manifold edges, consistently oriented: the two sides of every edge in turn
+            ne = nc // 2
+            edge_keys = keys[0::2]
+            side_corner = corner.reshape(ne, 2)
+            ids = np.arange(ne, dtype=it)
+            face_edges[first] = ids
+            face_edges[second] = ids
+            across[first] = second
+            across[second] = first
+            del ids
+        else:
+            ids = np.cumsum(new, dtype=it)
+            ids -= 1
+            ne = int(ids[-1]) + 1
+            edge_keys = keys[new]
+            slot = ids * 2
+            slot += side
+            if (slot[1:] == slot[:-1]).any():  # a side used twice: duplicate, non-manifold or flipped
+                _check_duplicate_faces(f)  # the clearer message when that is the cause
+                edges = _edges_of(edge_keys, nv)
+                fe = np.empty(nc, dtype=it)
+                fe[corner] = ids
+                sided = np.bincount(slot, minlength=2 * ne)
+                counts = sided[0::2] + sided[1::2]
+                if counts.max() > 2:
+                    _check_manifold_edges(edges, fe.reshape(nf, 3), counts)
+                _check_orientation(edges, fe.reshape(nf, 3), sided)
+            side_corner = np.full(2 * ne, -1, dtype=it)
+            side_corner[slot] = corner
+            face_edges[corner] = ids
+            across[corner] = side_corner[slot ^ 1]
+            side_corner = side_corner.reshape(ne, 2)
+            del ids, slot
+        del keys, side, corner, new, first, second
+        count = _check_manifold_vertices(fi, nv, across)
+        del across
 
-        # the side (2 e + 1 for a high-to-low run) of the edge opposite each corner
-        corner_side = face_edges * 2
-        corner_side += negative.ravel()
-        sided = np.bincount(corner_side, minlength=2 * ne)
-        if sided.max() > 1:  # a side used twice: a duplicate, a non-manifold edge or a flipped face
-            _check_duplicate_faces(f)  # the clearer message when that is the cause
-            edges = _edges_of(keys, nv)
-            counts = sided[0::2] + sided[1::2]
-            if counts.max() > 2:
-                _check_manifold_edges(edges, face_edges.reshape(nf, 3), counts)
-            _check_orientation(edges, face_edges.reshape(nf, 3), sided)
-        del sided
-
-        # each side of every edge: the corner 3 f + k opposite the edge, -1 if there is none
-        side_corner = np.full(2 * ne, -1, dtype=it)
-        side_corner[corner_side] = np.arange(3 * nf, dtype=it)
-        _check_manifold_vertices(fi, nv, side_corner, corner_side)
-        del corner_side
-
-        boundary_edges = side_corner[0::2] < 0
-        boundary_edges |= side_corner[1::2] < 0
+        boundary_edges = side_corner[:, 0] < 0
+        boundary_edges |= side_corner[:, 1] < 0
         boundary_vertices = np.zeros(nv, dtype=bool)
-        boundary_vertices[_edges_of(keys[boundary_edges], nv).ravel()] = True
-        referenced = np.zeros(nv, dtype=bool)
-        referenced[fi.ravel()] = True
+        if boundary_edges.any():
+            boundary_vertices[_edges_of(edge_keys[boundary_edges], nv).ravel()] = True
+        referenced = count > 0
 
         self.num_vertices = int(nv)
         self.num_edges = int(ne)
@@ -142,10 +169,10 @@ class Topology:
         # Compact working arrays (int32 where they fit); the int64 tensors of the public
         # attributes are made from them on first use.
         self._faces = fi  # a copy: later edits of the caller's faces are not seen
-        self._edge_keys = keys
+        self._edge_keys = edge_keys
         self._face_edges = face_edges.reshape(nf, 3)
-        self._negative = negative
-        self._side_corners = side_corner.reshape(ne, 2)
+        self._negative = negative.reshape(nf, 3)
+        self._side_corners = side_corner
         self.boundary_edges = torch.from_numpy(boundary_edges)
         self.boundary_vertices = torch.from_numpy(boundary_vertices)
         self.unreferenced_vertices = torch.from_numpy(np.flatnonzero(~referenced))
@@ -217,6 +244,17 @@ class Topology:
     @cached_property
     def _corner_vertices(self) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(self._faces.T))
+
+    def edge_ends(self) -> torch.Tensor:
+        """(2, 3, F) contiguous index tensor: the vertex at the head (``[0]``, corner ``k + 2``)
+        and at the tail (``[1]``, corner ``k + 1``) of the edge opposite corner ``k`` of every
+        face, int32 where the mesh allows (cached)."""
+        return self._edge_ends
+
+    @cached_property
+    def _edge_ends(self) -> torch.Tensor:
+        ft = self._faces.T
+        return torch.from_numpy(np.stack([ft[[2, 0, 1]], ft[[1, 2, 0]]]))
 
     @property
     def components(self) -> torch.Tensor:
@@ -385,7 +423,7 @@ def _check_orientation(edges, face_edges, sided) -> None:
         )
 
 
-def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
+def _check_manifold_vertices(f, nv, across) -> np.ndarray:
     """Every vertex's faces must form a single fan (connected through shared edges).
 
     The corners around a vertex are linked by ``next``: from corner ``k`` of a face, across
@@ -398,13 +436,12 @@ def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
 
     A closed fan of two faces means both faces have the same three vertices: a duplicated
     face (with flipped orientation, the other case is caught as an orientation error).
+
+    Returns the number of corners at each vertex.
     """
-    it = side_corner.dtype
+    it = across.dtype
     nc = 3 * f.shape[0]
-    # the corner across the edge opposite each corner (-1 on the boundary) ...
-    across = side_corner[corner_side ^ 1]
-    # ... read at corner k + 2; the edge opposite it leaves the vertex of corner k. Across
-    # it, the same vertex sits at the corner before the one opposite the edge.
+    # the corner across the edge opposite each corner (-1 on the boundary), ...
     nxt = across.reshape(-1, 3)[:, _PREV].ravel()
     del across
     walled = nxt < 0
@@ -454,6 +491,37 @@ def _check_manifold_vertices(f, nv, side_corner, corner_side) -> None:
     pillow[chain] = False
     if pillow.any():
         _check_duplicate_faces(f)
+    return count
+
+
+def _sorted_half_edges(src, dst, negative, nv: int, it) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The half-edges ``src -> dst`` sorted by edge key ``min * nv + max``, then side, then corner.
+
+    Returns ``(keys int64, side bool, corner it)`` in sorted order; ``side`` is ``negative``
+    (a run from the higher to the lower index). When they fit, key, side and corner are
+    packed into one int64 so that a plain in-place sort, cheaper than an argsort, gives all
+    three.
+    """
+    n = src.shape[0]
+    keys = np.minimum(src, dst).astype(np.int64)
+    keys *= nv
+    keys += np.maximum(src, dst)
+    keys <<= 1
+    keys |= negative
+    shift = max(int(n - 1).bit_length(), 1)
+    if nv * nv * 2 <= 2 ** (63 - shift):
+        keys <<= shift
+        keys |= np.arange(n, dtype=np.int64)
+        keys.sort()
+        corner = (keys & ((1 << shift) - 1)).astype(it)
+        keys >>= shift
+    else:
+        order = np.argsort(keys, kind="stable")
+        keys = keys[order]
+        corner = order.astype(it)
+    side = (keys & 1).astype(bool)
+    keys >>= 1
+    return keys, side, corner
 
 
 def unique_pairs(

@@ -81,7 +81,7 @@ _A, _B, _C = PAIR_A, PAIR_B, PAIR_C
 # --------------------------------------------------------------------------- operators
 
 
-def mass_matrix(verts, topo) -> torch.Tensor:
+def mass_matrix(verts, topo=None) -> torch.Tensor:
     """The edge mass matrix ``M_z`` (thesis 3.1, A.2): real, diagonal, exact (not lumped).
 
     .. math::  (M_z)_{ee} = \\sum_{T \\ni e} A_T / 3
@@ -94,7 +94,7 @@ def mass_matrix(verts, topo) -> torch.Tensor:
     return diagonal(mass_values(geom, topo))
 
 
-def connection_laplacian(verts, topo, n: int = 1) -> torch.Tensor:
+def connection_laplacian(verts, topo=None, n: int = 1) -> torch.Tensor:
     """The connection Laplacian ``L_c`` acting on representation vectors of n-direction fields.
 
     .. math::
@@ -114,7 +114,7 @@ def connection_laplacian(verts, topo, n: int = 1) -> torch.Tensor:
     return connection_laplacian_from(geom, signs, topo, n)
 
 
-def gradient(verts, topo) -> torch.Tensor:
+def gradient(verts, topo=None) -> torch.Tensor:
     """The gradient ``G`` from vertex functions to edge fields (thesis 4.2, A.4).
 
     ``M_z z = G f`` gives the edge field ``z`` of ``grad f``; per face,
@@ -129,7 +129,7 @@ def gradient(verts, topo) -> torch.Tensor:
     return cached_pattern(topo, "EV").assemble(gradient_values(geom, signs))
 
 
-def curl_div_operator(verts, topo) -> torch.Tensor:
+def curl_div_operator(verts, topo=None) -> torch.Tensor:
     """``K = G_{e->t} M_e``, the signed face-edge incidence scaled by edge lengths (thesis 3.3).
 
     ``M_t curl_T = K Re(z)`` and ``M_t div_T = -K Im(z)``, with ``M_t`` the face areas.
@@ -208,7 +208,7 @@ def real_form(a: torch.Tensor) -> torch.Tensor:
     return torch.sparse_coo_tensor(indices, values, (2 * m, 2 * n), check_invariants=False).coalesce()
 
 
-def curl_energy(verts, topo) -> torch.Tensor:
+def curl_energy(verts, topo=None) -> torch.Tensor:
     """``L_curl = [[K^T M_t^{-1} K, 0], [0, 0]]``, ``(2E, 2E)`` real (thesis 3.3).
 
     ``x^T L_curl x = int curl(psi)^2`` for ``x = (Re z, Im z)``.
@@ -217,13 +217,13 @@ def curl_energy(verts, topo) -> torch.Tensor:
     return embed_block(block, 0, 2 * ne)
 
 
-def div_energy(verts, topo) -> torch.Tensor:
+def div_energy(verts, topo=None) -> torch.Tensor:
     """``L_div = [[0, 0], [0, K^T M_t^{-1} K]]``, ``(2E, 2E)`` real (thesis 3.3)."""
     block, ne = curl_energy_block(verts, topo)
     return embed_block(block, ne, 2 * ne)
 
 
-def laplace_beltrami(verts, topo) -> torch.Tensor:
+def laplace_beltrami(verts, topo=None) -> torch.Tensor:
     """The Laplace-Beltrami stiffness ``L = Re(G^* M_z^{-1} G)`` (thesis 4.2).
 
     Real, symmetric, positive semi-definite, constants in its kernel; acts on the 2-ring.
@@ -241,7 +241,7 @@ def laplace_beltrami(verts, topo) -> torch.Tensor:
     return laplace_beltrami_from(g.values(), mass_values(geom, topo), topo)
 
 
-def vertex_mass(verts, topo, lumped: bool = False) -> torch.Tensor:
+def vertex_mass(verts, topo=None, lumped: bool = False) -> torch.Tensor:
     """The P1 vertex mass matrix ``M_v``: full FEM (default) or lumped (``A/3`` per face).
 
     Returns
@@ -282,7 +282,7 @@ def covariant_derivative(verts, topo, w, n: int = 1) -> torch.Tensor:
     return covariant_from(geom, signs, topo, w, n)
 
 
-def cotan_laplacian(verts, topo) -> torch.Tensor:
+def cotan_laplacian(verts, topo=None) -> torch.Tensor:
     """The cotangent Laplacian, as a positive semi-definite stiffness matrix (for comparison).
 
     .. math::  C_{ij} = -\\tfrac12 (\\cot \\alpha_{ij} + \\cot \\beta_{ij}), \\quad C_{ii} = -\\sum_j C_{ij}

@@ -16,6 +16,7 @@ from typing import Literal, overload
 import numpy as np
 import torch
 
+from .._validation import single_mesh
 from ..mesh.geometry import (
     OFF_DIAGONAL,
     FaceGeometry,
@@ -132,8 +133,13 @@ def prepare(verts, topo) -> tuple[torch.Tensor, Topology, FaceGeometry, torch.Te
     """Positions (or a geometry standing in for them), topology, face geometry and signs.
 
     ``verts`` may be a :class:`FaceGeometry` (e.g. :meth:`FaceGeometry.from_edge_lengths`):
-    it is then returned in place of the positions and used as the geometry.
+    it is then returned in place of the positions and used as the geometry; or a batch of
+    one mesh with ``verts_list()`` / ``faces_list()`` (a ``pytorch3d.structures.Meshes``),
+    with ``topo`` left out.
     """
+    verts, topo = single_mesh(verts, topo, "an operator function")
+    if topo is None:
+        raise ValueError("the faces (or a Topology) are needed with verts")
     if isinstance(verts, FaceGeometry):
         topo = intrinsic_topology(verts, topo)
         signs = topo.face_edge_signs.to(device=verts.device, dtype=verts.dtype)
@@ -172,22 +178,36 @@ def connection_laplacian_from(
     ``-(2 d_c / 2A) conj(r_ab)^n`` with ``r_ab = -delta_a delta_b (d_c + i 2A) / (l_a l_b)``;
     the transposed entry is its conjugate (Hermitian). Computed corner-major, on ``(F,)`` rows.
     """
-    a2 = geom.double_area
-    lt, dt = geom.lengths.t(), geom.dots.t()  # (3, F)
+    pattern = cached_pattern(topo, "EE")
+    tensors = (geom.lengths, geom.double_area, geom.dots)
+    if geom.device.type == "cpu" and not (torch.is_grad_enabled() and any(t.requires_grad for t in tensors)):
+        dtype = geom.dtype if n == 0 else torch.promote_types(geom.dtype, torch.complex64)
+        return pattern.assemble_by_blocks(lambda block: _laplacian_terms(geom, signs, n, block), dtype)
+    return pattern.assemble(*_laplacian_terms(geom, signs, n))  # lower = conj(upper): Hermitian
+
+
+def _laplacian_terms(geom: FaceGeometry, signs: torch.Tensor, n: int, block: slice = slice(None)):
+    """The diagonal and upper face terms of ``L_c^(n)`` (three ``(B,)`` columns each) of a block of faces."""
+    a2 = geom.double_area[block]
+    lt, dt = geom.lengths.t()[:, block], geom.dots.t()[:, block]  # (3, B)
     inv_a2 = 1 / a2
     diag = [2 * lt[k] * lt[k] * inv_a2 for k in range(3)]
     dc = [dt[(j + 2) % 3] for j in range(3)]
     weight = [-2 * dc[j] * inv_a2 for j in range(3)]
-    pattern = cached_pattern(topo, "EE")
     if n == 0:
-        return pattern.assemble(diag, weight)
+        return diag, weight
     upper = []
-    st = signs.t()
+    st = signs.t()[:, block]
     for j in range(3):
         inv_lab = 1 / (lt[j] * lt[(j + 1) % 3])
         w = weight[j] if n % 2 == 0 else weight[j] * (-st[j] * st[(j + 1) % 3])
-        upper.append(w * int_power(torch.complex(dc[j] * inv_lab, -a2 * inv_lab), n))
-    return pattern.assemble(diag, upper)  # lower = conj(upper): Hermitian
+        re, im = dc[j] * inv_lab, -a2 * inv_lab
+        if n == 1:  # the product with the real weight, without a complex copy of it
+            upper.append(torch.complex(w * re, w * im))
+        else:
+            power = int_power(torch.complex(re, im), n)
+            upper.append(torch.view_as_complex(torch.view_as_real(power) * w[:, None]))
+    return diag, upper
 
 
 def gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from .._dtypes import complex_dtype, real_dtype
-from .._validation import as_verts, check_n, check_vertex_count
+from .._device import move, parse_to
+from .._validation import as_verts, check_n, check_vertex_count, single_mesh
 from ..mesh.geometry import face_geometry
 from ..mesh.topology import Topology
 from . import functional as ops
@@ -26,7 +26,9 @@ class EdgeOperators(nn.Module):
 
     Parameters
     ----------
-    verts : (V, 3) float32 or float64 tensor
+    verts : (V, 3) float32 or float64 tensor, or a batch of one mesh
+        (``pytorch3d.structures.Meshes`` or anything with ``verts_list()`` and
+        ``faces_list()``; then ``faces`` is left out)
     faces : (F, 3) integer tensor, or a :class:`Topology`
     n : int
         Symmetry order of :attr:`connection_laplacian` (``n = 0``: scalar CR Laplacian).
@@ -48,9 +50,12 @@ class EdgeOperators(nn.Module):
 
     Notes
     -----
-    ``.to(dtype)``, ``.float()`` and ``.double()`` convert real buffers to the dtype and
-    complex buffers to the matching complex dtype (``nn.Module.to(torch.float32)`` alone
-    would drop their imaginary parts).
+    ``.to(device)``, ``.to(dtype)``, ``.to(device, dtype)``, ``.float()``, ``.double()``,
+    ``.cpu()`` and ``.cuda()`` move every buffer as ``nn.Module.to`` does (in place,
+    returning the module), real buffers to the dtype and complex buffers to the matching
+    complex dtype (``nn.Module.to(torch.float32)`` alone would drop their imaginary
+    parts). :meth:`update` then assembles on that device; the :attr:`topology` stays on
+    the host (its sparsity patterns copy their indices to each device once).
     """
 
     faces: torch.Tensor
@@ -66,8 +71,11 @@ class EdgeOperators(nn.Module):
     face_area: torch.Tensor
     edge_length: torch.Tensor
 
-    def __init__(self, verts, faces, n: int = 1):
+    def __init__(self, verts, faces=None, n: int = 1):
         super().__init__()
+        verts, faces = single_mesh(verts, faces, "EdgeOperators")
+        if faces is None:
+            raise ValueError("EdgeOperators needs faces (or a batch of one mesh with faces_list())")
         verts = as_verts(verts)
         topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
         check_vertex_count(verts, topo.num_vertices)
@@ -97,7 +105,12 @@ class EdgeOperators(nn.Module):
             self._buffers[name] = None
 
     def update(self, verts) -> EdgeOperators:
-        """Re-assemble every operator for new positions of the same mesh."""
+        """Re-assemble every operator for new positions of the same mesh (on the module's device)."""
+        if isinstance(verts, torch.Tensor) and verts.device != self.faces.device:
+            raise ValueError(
+                f"verts is on {verts.device} but the operators are on {self.faces.device}: move one "
+                f"of them (verts.to({str(self.faces.device)!r}) or operators.to({str(verts.device)!r}))"
+            )
         verts = as_verts(verts)
         topo = self.topology
         check_vertex_count(verts, topo.num_vertices)
@@ -163,22 +176,8 @@ class EdgeOperators(nn.Module):
 
     # dtype conversions that keep complex buffers complex
     def to(self, *args, **kwargs):
-        device, dtype, non_blocking, _ = torch._C._nn._parse_to(*args, **kwargs)
-        if dtype is not None and not (dtype.is_floating_point or dtype.is_complex):
-            raise ValueError(f"EdgeOperators can only be converted to a floating dtype, got {dtype}")
-        real = real_dtype(dtype) if dtype is not None else None
-        if real is not None and real not in (torch.float32, torch.float64):
-            raise ValueError(f"EdgeOperators supports float32 and float64, got {dtype}")
-
-        def convert(t):
-            target = None
-            if real is not None and t.is_complex():
-                target = complex_dtype(real)
-            elif real is not None and t.is_floating_point():
-                target = real
-            return t.to(device=device, dtype=target, non_blocking=non_blocking)
-
-        return self._apply(convert)
+        device, real, non_blocking = parse_to(*args, **kwargs)
+        return self._apply(lambda t: move(t, device, real, non_blocking))
 
     def float(self):
         return self.to(torch.float32)

@@ -1,0 +1,113 @@
+"""The RNA segmentation experiment's command: help, JSON rows, a bad folder, resuming."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import shared_path
+
+RUN = Path(__file__).resolve().parents[2] / "experiments" / "rna_segmentation" / "run.py"
+
+
+def _run(*args, check=True):
+    out = subprocess.run([sys.executable, str(RUN), *args], capture_output=True, text=True, timeout=900)
+    if check:
+        assert out.returncode == 0, out.stderr
+    return out
+
+
+def test_help_names_every_option():
+    text = _run("--help").stdout
+    for option in ("--data", "--split", "--models", "--seeds", "--epochs", "--json", "--device"):
+        assert option in text
+
+
+def test_bad_folder_is_named(tmp_path):
+    out = _run("--data", str(tmp_path), check=False)
+    assert out.returncode == 2 and "RNA dataset folder" in out.stderr
+
+
+def test_a_device_torch_cannot_use_is_named(tmp_path):
+    out = _run("--data", str(tmp_path), "--device", "nonsense", check=False)
+    assert out.returncode == 2 and "'nonsense' is not a device" in out.stderr
+
+
+def test_quick_run_writes_the_json_rows_and_resumes(tmp_path):
+    sample = shared_path("datasets", "rna_sample")
+    split = tmp_path / "split.json"
+    split.write_text(json.dumps({"train": ["4V48_A9", "5J8A_DB"], "test": ["3CXC_9"]}))
+    args = ["--data", str(sample), "--split", str(split), "--epochs", "2", "--seeds", "0", "--width", "8"]
+    args += [
+        "--target-vertices",
+        "400",
+        "--cache",
+        str(tmp_path / "cache"),
+        "--run-dir",
+        str(tmp_path / "runs"),
+    ]
+    _run(*args, "--json", str(tmp_path / "a.json"))
+    rows = json.loads((tmp_path / "a.json").read_text())["results"]
+    assert [r["model"] for r in rows] == ["edgefieldnet", "diffusionnet"]
+    for r in rows:
+        for key in ("seed", "test_accuracy", "test_miou", "train_seconds", "precompute_seconds"):
+            assert key in r
+        assert 0 <= r["test_miou"] <= 1 and 0 <= r["test_accuracy"] <= 1
+        assert r["test_vertices"] == 15225  # every vertex of 3CXC_9's file, at file resolution
+        assert r["test_resolution"] == "file" and "test_accuracy_decimated" in r
+        assert len(r["history"]) == 2
+    assert any("diffusion" in r["model"] for r in rows)
+    # a second call resumes from the checkpoints: no epoch is trained again, same results
+    out = _run(*args, "--json", str(tmp_path / "b.json"))
+    again = json.loads((tmp_path / "b.json").read_text())["results"]
+    assert "epoch 1/2" not in out.stdout and "resumed" in out.stdout
+    for r, s in zip(rows, again):
+        assert r["test_accuracy"] == pytest.approx(s["test_accuracy"])
+    # the picture of a test molecule from the final weights: truth, prediction and errors
+    png = tmp_path / "figure.png"
+    figure = [sys.executable, str(RUN.with_name("figure.py")), "--data", str(sample), "--width", "8"]
+    figure += ["--checkpoint", str(tmp_path / "runs" / "split-edgefieldnet-seed0.pt"), "-o", str(png)]
+    figure += ["--cache", str(tmp_path / "cache")]
+    out = subprocess.run(figure, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    accuracy = float(out.stdout.split("accuracy ")[-1])
+    assert accuracy == pytest.approx(rows[0]["test_accuracy"], abs=1e-9)  # the run's score of 3CXC_9
+    _assert_three_coloured_panels(png)
+    # --device cpu (the default, named), trained afresh: the same numbers
+    args[args.index(str(tmp_path / "runs"))] = str(tmp_path / "runs-cpu")
+    _run(*args, "--device", "cpu", "--json", str(tmp_path / "c.json"))
+    named = json.loads((tmp_path / "c.json").read_text())["results"]
+    for r, s in zip(rows, named):
+        assert (r["test_accuracy"], r["test_miou"]) == (s["test_accuracy"], s["test_miou"])
+        assert [h["loss"] for h in r["history"]] == [h["loss"] for h in s["history"]]
+
+
+def _assert_three_coloured_panels(png: Path) -> None:
+    """Three panels side by side, each with a molecule; the first two in many colours, the
+    third grey with red errors."""
+    import matplotlib.image as mpimg
+    import numpy as np
+
+    image = mpimg.imread(png)[..., :3]
+    thirds = np.array_split(image, 3, axis=1)
+    for k, panel in enumerate(thirds):
+        drawn = panel[np.abs(panel - 1).sum(-1) > 0.15]  # not the white background
+        assert len(drawn) > 0.02 * panel.shape[0] * panel.shape[1], k
+        colours = {tuple(c) for c in np.round(drawn * 4).astype(int)}
+        if k < 2:
+            assert len(colours) > 10, (k, len(colours))
+        else:
+            red = (drawn[:, 0] > 0.5) & (drawn[:, 1] < 0.3) & (drawn[:, 2] < 0.3)
+            assert red.any()
+
+
+def test_readme_tables_are_those_of_the_saved_runs():
+    report = RUN.with_name("report.py")
+    out = subprocess.run(
+        [sys.executable, str(report), "--check"], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stderr
+    readme = RUN.with_name("README.md").read_text()
+    assert "<!-- table:official -->" in readme and "<!-- table:validation -->" in readme

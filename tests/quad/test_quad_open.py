@@ -1,0 +1,134 @@
+"""Quad meshes of open surfaces: boundary-aligned fields and maps, quads along the boundary."""
+
+import numpy as np
+import pytest
+import scipy.spatial
+import torch
+
+import torch_edgevf as ev
+from torch_edgevf.mesh.topology import Topology
+from torch_edgevf.quad.mesh import quad_mesh, quad_mesh_report
+
+from conftest import shared_mesh
+
+
+def bumpy_square():
+    v, f = ev.meshes.grid(12, 12)
+    v = v.clone()
+    v[:, 2] = 0.1 * torch.sin(3 * v[:, 0]) * torch.cos(2 * v[:, 1])
+    return v, f
+
+
+def wavy_disk():
+    pts = [(0.0, 0.0)] + [
+        (r * np.cos(t + 0.1 * r), r * np.sin(t + 0.1 * r))
+        for r in np.linspace(0.15, 1, 8)
+        for t in np.linspace(0, 2 * np.pi, int(40 * r), endpoint=False)
+    ]
+    pts = np.array(pts)
+    tri = scipy.spatial.Delaunay(pts).simplices
+    z = 0.15 * np.sin(2 * pts[:, 0]) * pts[:, 1]
+    return torch.tensor(np.column_stack([pts, z])), torch.tensor(tri, dtype=torch.int64)
+
+
+def annulus():
+    import trimesh
+
+    m = trimesh.creation.annulus(r_min=0.4, r_max=1.0, height=0.2, sections=48)
+    # the top face of trimesh's annulus solid: its faces with an upward normal
+    up = m.face_normals[:, 2] > 0.99
+    sub = m.submesh([np.flatnonzero(up)], append=True)
+    sub = sub.subdivide().subdivide()
+    return torch.tensor(sub.vertices), torch.tensor(sub.faces, dtype=torch.int64)
+
+
+CASES = {
+    "square": (bumpy_square, "smoothest", "hard"),
+    "disk": (wavy_disk, "smoothest", "hard"),
+    "disk soft": (wavy_disk, "curvature", "soft"),
+    "annulus (trimesh)": (annulus, "smoothest", "hard"),
+}
+
+
+@pytest.fixture(scope="module", params=list(CASES))
+def open_quads(request):
+    make, field, boundary = CASES[request.param]
+    v, f = make()
+    return v, f, quad_mesh(v, f, field=field, boundary=boundary)
+
+
+def boundary_distance(points, verts, faces):
+    """Distance of each point to the mesh's boundary polyline (naive: all boundary edges)."""
+    topo = Topology(faces, verts.shape[0])
+    e = topo.edges.numpy()[topo.boundary_edges.numpy()]
+    a, b = verts[e[:, 0]], verts[e[:, 1]]
+    s = b - a
+    lam = np.clip(((points[:, None] - a[None]) * s[None]).sum(-1) / (s * s).sum(-1)[None], 0, 1)
+    return np.linalg.norm(points[:, None] - a[None] - lam[..., None] * s[None], axis=-1).min(1)
+
+
+def test_open_quad_mesh_is_pure_manifold_with_the_euler_characteristic(open_quads):
+    v, f, q = open_quads
+    r = quad_mesh_report(q.verts, q.quads)
+    assert r.manifold and not r.closed and r.num_quads > 50
+    assert r.euler_characteristic == Topology(f, v.shape[0]).euler_characteristic
+
+
+def test_quad_boundary_follows_the_mesh_boundary(open_quads):
+    v, f, q = open_quads
+    qv, qf = q.verts.numpy(), q.quads.numpy()
+    edges = np.sort(np.stack([qf, np.roll(qf, -1, 1)], -1).reshape(-1, 2), 1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    bq = np.unique(uniq[count == 1].ravel())
+    diag = float(np.linalg.norm(v.numpy().max(0) - v.numpy().min(0)))
+    assert boundary_distance(qv[bq], v.numpy(), f.numpy()).max() < 1e-12 * diag
+    # and the interior vertices are inside: away from the boundary
+    inner = np.setdiff1d(np.arange(len(qv)), bq)
+    assert boundary_distance(qv[inner], v.numpy(), f.numpy()).min() > 1e-6 * diag
+    # as many boundary loops as the input (one per hole, plus the outer one)
+    import scipy.sparse as sp
+    import scipy.sparse.csgraph as csg
+
+    be = uniq[count == 1]
+    n = len(qv)
+    loops = csg.connected_components(sp.coo_matrix((np.ones(len(be)), (be[:, 0], be[:, 1])), shape=(n, n)))[1]
+    topo = Topology(f, v.shape[0])
+    me = topo.edges.numpy()[topo.boundary_edges.numpy()]
+    nv = v.shape[0]
+    mesh_loops = csg.connected_components(
+        sp.coo_matrix((np.ones(len(me)), (me[:, 0], me[:, 1])), shape=(nv, nv))
+    )[1]
+    assert len(np.unique(loops[bq])) == len(np.unique(mesh_loops[np.unique(me)]))
+
+
+def test_irregular_vertices_are_the_cones_and_the_boundary_corners(open_quads):
+    _, _, q = open_quads
+    r = quad_mesh_report(q.verts, q.quads)
+    assert bool((q.cone_vertices >= 0).all()) and bool((q.corner_vertices >= 0).all())
+    expected = set(q.cone_vertices.tolist()) | set(q.corner_vertices.tolist())
+    assert set(r.irregular.tolist()) == expected
+    assert r.valence[q.corner_vertices.numpy()].tolist() == q.corner_turns.tolist()
+    cones = np.rint(4 - 4 * q.cone_index.numpy()).astype(int)
+    assert r.valence[q.cone_vertices.numpy()].tolist() == cones.tolist()
+    # Gauss-Bonnet with boundary: sum of indices + sum (2 - turns) / 4 = chi
+    total = float(q.cone_index.sum()) + float((2 - q.corner_turns).sum()) / 4
+    assert total == r.euler_characteristic
+
+
+def test_hard_boundary_alignment_puts_a_cross_direction_along_every_boundary_edge():
+    v, f = wavy_disk()
+    q = quad_mesh(v, f, field="smoothest", boundary="hard")
+    topo = Topology(f, v.shape[0])
+    zb = q.field[topo.boundary_edges]
+    assert torch.allclose(torch.angle(zb), torch.zeros_like(zb.real), atol=1e-8)
+
+
+@pytest.mark.slow
+# plane_holes is in benchmarks/bench_quad.py (its map takes many minutes)
+@pytest.mark.parametrize("name, quads", [("mountain.obj", 2000)])
+def test_real_open_meshes(name, quads):
+    mesh = shared_mesh(name)
+    q = quad_mesh(mesh.verts, mesh.faces, quads=quads, boundary="hard")
+    r = quad_mesh_report(q.verts, q.quads)
+    assert r.manifold and not r.closed
+    assert r.euler_characteristic == Topology(mesh.faces, mesh.verts.shape[0]).euler_characteristic

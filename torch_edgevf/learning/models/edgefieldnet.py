@@ -1,0 +1,236 @@
+"""The edge-field network: a scalar stream on the vertices and a vector stream of edge fields.
+
+The two streams are coupled through the gradient ``G``, as DeltaConv couples gradient and
+divergence::
+
+    x (V, C) --linear--> x
+    block:  xd = diffuse_L(x)                    learned time per channel, vertex Laplacian
+            c  = Phi^H G (xd W) [+ c_prev A]     gradients and co-gradients of mixed scalars,
+                                                 as coefficients in the L_c eigenbasis Phi
+            c  = diag(exp(-lambda t)) c          learned L_c heat diffusion of the fields
+            x  = x + MLP(x, xd, pool_v tanh Re(u conj(u A)))     u = Phi c, the fields
+            c_prev = c_prev + c
+    logits: a linear layer per vertex, then the mass-weighted mean over each mesh
+            (head="global"), or per vertex / per face
+
+The fields of the vector stream are outputs of the ``L_c`` diffusion in a truncated
+eigenbasis, so they lie in its span: the network carries their coefficients ``c``, and
+``Phi^H G`` is ``(G^H Phi)^H``, computed once per mesh
+(:func:`~torch_edgevf.learning.layers.adjoint_on_basis`). The invariant products
+``Re(u conj(u A))`` read the fields in a frame-free way; every layer is gauge equivariant
+and its operators intrinsic, so with intrinsic input features the outputs are invariant to
+rigid motions and to the numbering of the vertices.
+
+This is the network recommended by the PSB classification study (the repository's
+``experiments/psb_classification``): its input there is the logarithm of the heat kernel
+signature (``heat_kernel_signature(..., log=True)``).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ..layers import ComplexLinear, LearnedDiffusion, adjoint_on_basis
+from ..layers.gradient import _gradient_features
+from ..layers.pointwise import _complex_linear
+from .common import (
+    VECTORS,
+    as_mesh_batch,
+    check_batch,
+    check_options,
+    diffuse_vertices,
+    mesh_slices,
+    mini_mlp,
+    offsets_of,
+    project,
+    readout,
+    synthesize,
+    vertex_invariants,
+)
+
+__all__ = ["EdgeFieldBlock", "EdgeFieldNet"]
+
+
+class EdgeFieldBlock(nn.Module):
+    """One block of :class:`EdgeFieldNet`: scalars ``(V, C)`` and edge fields ``(E, C_v)``.
+
+    Parameters
+    ----------
+    width : int, scalar channels ``C``
+    vector_width : int, complex channels ``C_v`` of the vector stream
+    mlp : sequence of int, hidden sizes of the per-vertex MLP
+    dropout : float, in the MLP
+    vector : {"edge", "vertex", "none"}
+        ``"edge"``: the edge-based gradient ``G`` and the ``L_c`` diffusion (this
+        library's operators); ``"vertex"``: DiffusionNet's least-squares vertex gradient
+        in per-vertex tangent frames instead (no field diffusion); ``"none"``: scalars only.
+    carry : bool
+        Mix the fields of the previous blocks into this block's fields (``c_prev A``); off
+        for the first block, which has none.
+
+    Forward
+    -------
+    ``forward(x, z, batch) -> (x, z)``: the scalars and the sum of the blocks' fields so
+    far, on the edges (``vector="edge"``) or the vertices; :meth:`forward_spectral` the
+    same with the fields as eigenbasis coefficients (what :class:`EdgeFieldNet` runs).
+    """
+
+    def __init__(
+        self,
+        width: int,
+        vector_width: int,
+        mlp=(64, 64),
+        dropout: float = 0.5,
+        vector: str = "edge",
+        carry: bool = True,
+    ):
+        super().__init__()
+        if vector not in VECTORS:
+            raise ValueError(f"vector must be one of {VECTORS}, got {vector!r}")
+        self.vector, self.vector_width = vector, vector_width
+        self.diffusion = LearnedDiffusion(width, positivity="clamp", init_times=0.0)
+        extra = 0
+        if vector != "none":
+            self.lift = nn.Linear(width, 2 * vector_width, bias=False)
+            self.mix = ComplexLinear(vector_width, vector_width) if carry else None
+            self.products = nn.Parameter(
+                torch.randn(vector_width, vector_width, 2) / (2 * vector_width) ** 0.5
+            )
+            extra = vector_width
+        self.field_diffusion: LearnedDiffusion | None = None
+        if vector == "edge":
+            self.field_diffusion = LearnedDiffusion(vector_width, positivity="clamp", init_times=0.0)
+        self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
+
+    def _lifted(self, xd: torch.Tensor) -> torch.Tensor:
+        """The complex scalars ``xd W`` whose gradients are the block's new fields."""
+        return torch.view_as_complex(self.lift(xd).unflatten(1, (self.vector_width, 2)).contiguous())
+
+    def forward(self, x, z, batch):
+        if self.vector == "edge":
+            c = None if z is None or self.mix is None else project(z, batch)
+            x, _, u = self.forward_spectral(x, c, batch)
+            return x, u if z is None else z + u
+        xd = diffuse_vertices(self.diffusion, x, batch)
+        feats = [x, xd]
+        if self.vector == "vertex":
+            u = _gradient_features(self._lifted(xd), batch.vertex_gradient)
+            if z is not None and self.mix is not None:
+                u = u + _complex_linear(z, self.mix.weight)
+            feats.append(vertex_invariants(u, self.products, batch, "vertex"))
+            z = u if z is None else z + u
+        return x + self.mlp(torch.cat(feats, dim=1)), z
+
+    def forward_spectral(self, x, c, batch):
+        """The block on the coefficients of the fields in the edge eigenbasis (``vector="edge"``).
+
+        The block's fields lie in the span of the ``M_z``-orthonormal eigenbasis ``Phi`` of
+        each mesh: ``u = Phi c`` with ``c = diag(e^{-lambda t}) (Phi^H G a + c_prev A)``,
+        the gradient part through ``Phi^H M_z M_z^{-1} G = (G^H Phi)^H``. These are the
+        numbers of the formula on the edges up to rounding, without its sparse products.
+
+        Parameters
+        ----------
+        x : (V, C) scalars
+        c : (B, k, C_v) complex tensor or None, the coefficients of the fields of the
+            previous blocks (their sum)
+        batch : :class:`~torch_edgevf.learning.batching.MeshBatch`
+
+        Returns
+        -------
+        ``(x, c_new, u)``: the new scalars, the coefficients ``(B, k, C_v)`` of this
+        block's fields and the fields ``Phi c_new`` ``(E, C_v)``.
+        """
+        if self.field_diffusion is None:
+            raise ValueError(f"forward_spectral needs vector='edge', got vector={self.vector!r}")
+        xd = diffuse_vertices(self.diffusion, x, batch)
+        a = self._lifted(xd)
+        basis = adjoint_on_basis(batch.gradient, batch.edge_evecs).to(a.dtype)  # (V, k): G^H Phi
+        new = torch.stack([basis[s].mH @ a[s] for s in mesh_slices(offsets_of(batch, "vertex"))])
+        if c is not None and self.mix is not None:
+            new = new + _complex_linear(c.flatten(0, 1), self.mix.weight).unflatten(0, c.shape[:2])
+        t = self.field_diffusion.times.to(new.real.dtype)
+        new = new * torch.exp(-batch.edge_evals.to(t.dtype)[:, :, None] * t)
+        u = synthesize(new, batch)
+        feats = [x, xd, vertex_invariants(u, self.products, batch, "edge")]
+        return x + self.mlp(torch.cat(feats, dim=1)), new, u
+
+
+class EdgeFieldNet(nn.Module):
+    """The edge-field network (see the module docstring): the recommended network.
+
+    Needs in the batch the eigenpairs of a vertex Laplacian and, with ``vector="edge"``,
+    those of ``L_c`` and the gradient ``G`` (:func:`compute_operators`; with
+    ``vector="vertex"`` the vertex gradient, ``vertex_gradient=True``). Positive features
+    whose scales span orders of magnitude, such as heat kernel signatures, are best given
+    as their logarithm (``heat_kernel_signature(..., log=True)``).
+
+    Parameters
+    ----------
+    in_channels : int, vertex feature channels
+    out_channels : int, classes (or outputs)
+    width : int, scalar channels
+    vector_width : int, complex channels of the vector stream
+    num_blocks : int
+    mlp : sequence of int, hidden sizes of each block's per-vertex MLP
+    dropout : float, in the MLPs
+    head : {"global", "vertex", "face"}
+        One output per mesh (the mass-weighted mean of per-vertex logits), per vertex, or
+        per face (the mean over its corners).
+    vector : {"edge", "vertex", "none"}
+        The vector stream: edge fields with ``G`` and ``L_c`` (default); DiffusionNet's
+        vertex gradients in their place; none (scalars only). The last two are the
+        ablations a study of the edge fields needs.
+
+    Forward
+    -------
+    ``forward(batch) -> (B | V | F, out_channels)`` logits; ``batch`` a
+    :class:`~torch_edgevf.learning.batching.MeshBatch` or a PyG batch of
+    ``torch_edgevf.pyg.OperatorData``.
+    """
+
+    def __init__(
+        self,
+        in_channels: int,
+        out_channels: int,
+        width: int = 64,
+        vector_width: int = 16,
+        num_blocks: int = 3,
+        mlp=(64, 64),
+        dropout: float = 0.5,
+        head: str = "global",
+        vector: str = "edge",
+    ):
+        super().__init__()
+        check_options(in_channels, out_channels, width, num_blocks, head, dropout)
+        if vector not in VECTORS:
+            raise ValueError(f"vector must be one of {VECTORS}, got {vector!r}")
+        if not isinstance(vector_width, int) or isinstance(vector_width, bool) or vector_width < 1:
+            raise ValueError(f"vector_width must be a positive integer, got {vector_width!r}")
+        self.in_channels, self.head, self.vector = in_channels, head, vector
+        self.first = nn.Linear(in_channels, width)
+        self.blocks = nn.ModuleList(
+            EdgeFieldBlock(width, vector_width, mlp, dropout, vector, carry=i > 0) for i in range(num_blocks)
+        )
+        self.last = nn.Linear(width, out_channels)
+        self._needs = {
+            "edge": ("gradient", "edge_evecs", "edge_evals", "edge_mass"),
+            "vertex": ("vertex_gradient",),
+            "none": (),
+        }[vector]
+
+    def forward(self, batch):
+        batch = as_mesh_batch(batch)
+        check_batch(self, batch, self.in_channels, ("vertex_evecs", "vertex_evals", *self._needs))
+        x = self.first(batch.features)
+        if self.vector == "edge":
+            c = None  # the fields as coefficients in the edge eigenbasis
+            for block in self.blocks:
+                x, new, _ = block.forward_spectral(x, c, batch)
+                c = new if c is None else c + new
+        else:
+            z = None
+            for block in self.blocks:
+                x, z = block(x, z, batch)
+        return readout(x, self.last, batch, self.head)
