@@ -114,6 +114,7 @@ API_SECTIONS = [
     ("Fields", "fields"),
     ("Quad meshes", "quad"),
     ("Learning", "learning"),
+    ("PyTorch Geometric", "pyg"),
     ("Files", "io"),
     ("Pictures", "render"),
     ("Process", "allocator"),
