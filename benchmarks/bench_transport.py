@@ -37,7 +37,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 import torch_edgevf as ev  # noqa: E402
-from torch_edgevf.fields.representation import nth_power  # noqa: E402
+from torch_edgevf.fields.powers import nth_power  # noqa: E402
 from torch_edgevf.fields.transport import SUGGESTED_SMOOTHING, Transporter  # noqa: E402
 from torch_edgevf.linalg import SparseSolver, solve  # noqa: E402
 from torch_edgevf.mesh.topology import Topology  # noqa: E402

@@ -27,8 +27,9 @@ of the Crouzeix-Raviart fields across edges (which the face-by-face ``D_w`` leav
 that its Hermitian part is the divergence of ``w`` alone, and the upwind penalty ``-U_w`` on
 the jumps.  The ``M_z``-norm never grows beyond what the divergence of ``w`` implies, the
 dissipation vanishes with the mesh size, and the error is of second order in it.  Time
-integration: classical fourth-order Runge-Kutta steps, their number following from the
-operator (``|w|``, ``h``) and ``t``; one sparse product per stage, no factorization.  One
+integration: explicit fourth-order polynomial steps (degree 8 where its stable step per
+sparse product beats the classical Runge-Kutta method's), their number following from the
+operator (``|w|``, ``h``) and ``t``; one sparse product per degree, no factorization.  One
 full turn along the unit sphere's rotation field, ``z0 = w^n``, on
 icosphere 5 keeps the ``M_z``-norm within 0.2% and has relative errors of 0.0023 /
 0.0087 / 0.036 for ``n = 1 / 2 / 4``, falling at order 2 with the mesh size
@@ -50,7 +51,7 @@ legitimately: raise ``growth_tol`` or pass ``None``.
 
 Gradients flow to ``z0`` and ``t``; to the positions and ``w`` as well when they require
 gradients at construction (the upwind scheme then uses the exact exponential
-of :func:`~torch_edgevf.linalg.expm_multiply`, slower, instead of the Runge-Kutta steps).
+of :func:`~torch_edgevf.linalg.expm_multiply`, slower, instead of the polynomial steps).
 """
 
 from __future__ import annotations
@@ -183,7 +184,7 @@ class Transporter:
 
     @property
     def upwind_operator(self) -> UpwindOperator:
-        """The Runge-Kutta integrator of the upwind scheme (built on first use)."""
+        """The polynomial-step integrator of the upwind scheme (built on first use)."""
         if self.scheme == "thesis":
             raise ValueError("the thesis scheme has no upwind operator")
         if self._upwind is None:
@@ -203,7 +204,7 @@ class Transporter:
         return torch.sqrt((m.to(z.real.dtype) * (z.real**2 + z.imag**2)).sum(0))
 
     def num_steps(self, t: float) -> int:
-        """The number of Runge-Kutta steps the upwind scheme takes for time ``t``."""
+        """The number of polynomial steps the upwind scheme takes for time ``t``."""
         return self.upwind_operator.num_steps(float(t))
 
     def _step(self, z: torch.Tensor, dt: torch.Tensor) -> torch.Tensor:
@@ -219,7 +220,7 @@ class Transporter:
         """Transport ``z0`` for time ``t`` in ``steps`` equal steps (smoothing after each).
 
         Without smoothing the result hardly depends on ``steps`` (the upwind scheme chooses
-        its Runge-Kutta steps within each).  Differentiable with respect
+        its polynomial steps within each).  Differentiable with respect
         to ``z0`` and ``t`` (a tensor), and to ``verts`` and ``w`` when they required
         gradients at construction.  Warns (:class:`TransportGrowthWarning`) when the
         ``M_z``-norm grows beyond ``growth_tol``.

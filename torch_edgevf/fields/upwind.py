@@ -53,13 +53,24 @@ larger after a full turn at icosphere level 4.
 
 Time integration
 ----------------
-Classical fourth-order Runge-Kutta steps on the ``M_z``-symmetrized generator
-:math:`\tilde K = M_z^{-1/2} A M_z^{-1/2}`, a sparse product per stage, no factorization.
-The numerical range of :math:`\tilde K` lies in the rectangle
-:math:`[-\lambda_{\max}(\tilde U), \max \tilde\Delta] \times i[-\rho(\tilde S), \rho(\tilde S)]`
-(:math:`\tilde S` the skew part), both bounds estimated by Lanczos; the step is the largest
-for which the rectangle's left part lies in the stability region of the method, with a 10%
-margin: about ``h / (3 |w|)``, so the step count follows from ``|w|``, ``t`` and ``h``.
+Explicit polynomial steps :math:`y \leftarrow p(\Delta t\,\tilde K)\,y` on the
+``M_z``-symmetrized generator :math:`\tilde K = M_z^{-1/2} A M_z^{-1/2}`, a sparse product
+per degree, no factorization.  The numerical range of :math:`\tilde K` lies in the rectangle
+:math:`[-\lambda_{\max}(\tilde U), 0] \times i[-\rho(\tilde S), \rho(\tilde S)]`
+(:math:`\tilde S` the skew part), both bounds estimated by Lanczos.  Where :math:`|p| \le 1`
+on :math:`\Delta t` times that rectangle, :math:`\|p(\Delta t \tilde K)^N\| \le 1 + \sqrt 2`
+for every ``N`` (Crouzeix's bound on the numerical range): the steps never grow the field.
+The largest such :math:`\Delta t` is found by bisection on the sampled boundary; the step
+taken is 10% below it, where :math:`|p| \le 1` holds on a sampling 50x denser as well.
+Every polynomial agrees with the exponential to fourth order (``p(x) = 1 + x + ... + x^4/24
++ ...``), so the steps are fourth-order accurate; the candidates are the classical
+Runge-Kutta polynomial (degree 4) and degree-8 polynomials whose higher coefficients
+maximize the stable rectangle for an aspect ratio :math:`\lambda_{\max}(\tilde U) / \rho`
+of 0.5, 1, 1.7 or 3 (a linear program on the rectangle's boundary).  The integrator takes
+the candidate with the largest stable step per sparse product for the operator's own
+rectangle, with a 10% margin: the step count follows from ``|w|``, ``t`` and ``h``.  On the
+sphere's rotation field (aspect ratio 1.65) the degree-8 polynomial takes 1.5x fewer sparse
+products than the classical Runge-Kutta method.
 """
 
 from __future__ import annotations
@@ -77,8 +88,20 @@ from ..operators.kernels import covariant_from, mass_values, prepare
 
 __all__ = ["UpwindOperator", "upwind_parts"]
 
-#: Safety factor on the largest stable Runge-Kutta step.
+#: Safety factor on the largest stable step.
 STEP_MARGIN = 0.9
+
+_RK4 = (1.0, 1.0, 1 / 2, 1 / 6, 1 / 24)
+#: The candidate step polynomials, by their coefficients ``c_0, c_1, ...`` (module
+#: docstring): the classical Runge-Kutta polynomial and the degree-8 polynomials for the
+#: aspect ratios 0.5, 1, 1.7 and 3 of the numerical-range rectangle.
+STEP_POLYNOMIALS: tuple[tuple[float, ...], ...] = (
+    _RK4,
+    _RK4 + (0.0070978648523860755, 0.0010372592730561064, 8.54608350325072e-05, 6.6622205552201155e-06),
+    _RK4 + (0.007569288700600565, 0.0010220867467816753, 8.755521146688918e-05, 4.161412161004237e-06),
+    _RK4 + (0.007514041105196208, 0.0009077848203738264, 6.47373025944663e-05, 2.1003926724332285e-06),
+    _RK4 + (0.007043406204139782, 0.0007143301161838981, 3.8749385631719026e-05, 8.678120462794387e-07),
+)
 
 
 def to_numpy(x: torch.Tensor) -> np.ndarray:
@@ -219,25 +242,37 @@ def _csr(a: torch.Tensor, scale: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((v, (idx[0], idx[1])), shape=tuple(a.shape))
 
 
-def _rk4_polynomial(u: np.ndarray) -> np.ndarray:
-    return 1 + u + u**2 / 2 + u**3 / 6 + u**4 / 24
+def _polynomial(coef, u: np.ndarray) -> np.ndarray:
+    out = np.full_like(u, coef[-1])
+    for c in coef[-2::-1]:
+        out = out * u + c
+    return out
 
 
-def _rk4_scale(s: float, h: float) -> float:
-    """The largest ``c`` with ``c ([-h, 0] x i[-s, s])`` in the RK4 stability region."""
+def stable_scale(coef, s: float, h: float) -> float:
+    """The largest ``c`` with ``|p| <= 1`` on ``c ([-h, 0] x i[-s, s])`` (``p`` of ``coef``)."""
     if s <= 0 and h <= 0:
         return math.inf
     ys = np.linspace(0.0, s, 257)
     xs = np.linspace(-h, 0.0, 257)
-    pts = np.concatenate([1j * ys, -h + 1j * ys, xs + 1j * s])
-    lo, hi = 0.0, 4.0 / max(s, h)
+    pts = np.concatenate([1j * ys, -h + 1j * ys, xs + 1j * s])  # p has real coefficients
+    lo, hi = 0.0, 2.0 * len(coef) / max(s, h)
     for _ in range(50):
         c = 0.5 * (lo + hi)
-        if np.all(np.abs(_rk4_polynomial(c * pts)) <= 1 + 1e-12):
+        if np.all(np.abs(_polynomial(coef, c * pts)) <= 1 + 1e-12):
             lo = c
         else:
             hi = c
     return lo
+
+
+def _best_polynomial(s: float, h: float) -> tuple[tuple[float, ...], float]:
+    """The step polynomial with the largest stable step per sparse product, and that step."""
+    scales = [stable_scale(p, s, h) for p in STEP_POLYNOMIALS]
+    if not all(math.isfinite(c) for c in scales):
+        return _RK4, math.inf
+    best = max(range(len(scales)), key=lambda i: scales[i] / (len(STEP_POLYNOMIALS[i]) - 1))
+    return STEP_POLYNOMIALS[best], scales[best]
 
 
 def _largest_eigenvalue(a: sp.csr_matrix, which: str) -> float:
@@ -259,7 +294,7 @@ def _largest_eigenvalue(a: sp.csr_matrix, which: str) -> float:
 
 
 class UpwindOperator:
-    """``M_z dz/dt = A_{sw} z`` integrated with RK4 on the ``M_z``-symmetrized generator.
+    """``M_z dz/dt = A_{sw} z`` integrated by polynomial steps on the ``M_z``-symmetrized generator.
 
     Parameters
     ----------
@@ -278,7 +313,8 @@ class UpwindOperator:
         skew = 0.5 * (self._P - self._P.conj().T)
         self.skew_radius = _largest_eigenvalue((1j * skew).tocsr(), "LM")
         self.damping = _largest_eigenvalue(self._U, "LA")
-        self.max_step = STEP_MARGIN * _rk4_scale(self.skew_radius, self.damping)
+        self.coefficients, scale = _best_polynomial(self.skew_radius, self.damping)
+        self.max_step = STEP_MARGIN * scale
 
     def generator(self, sign: int) -> sp.csr_matrix:
         if sign not in self._K:
@@ -291,7 +327,7 @@ class UpwindOperator:
         return self._KH[sign]
 
     def num_steps(self, t: float) -> int:
-        """The number of RK4 steps for time ``|t|``."""
+        """The number of steps for time ``|t|``."""
         if t == 0 or not math.isfinite(self.max_step):
             return 1
         return max(1, math.ceil(abs(t) / self.max_step))
@@ -300,14 +336,13 @@ class UpwindOperator:
         s = self.sqrt_mass if power > 0 else 1.0 / self.sqrt_mass
         return z * (s if z.ndim == 1 else s[:, None])
 
-    @staticmethod
-    def _step(hK, y: np.ndarray) -> np.ndarray:
-        """``R(hK) y = y + hK (y + hK/2 (y + hK/3 (y + hK/4 y)))``, the RK4 polynomial."""
-        u = y
-        for c in (0.25, 1 / 3, 0.5, 1.0):
+    def _step(self, hK, y: np.ndarray) -> np.ndarray:
+        """``p(hK) y`` by Horner's rule, one sparse product per degree."""
+        coef = self.coefficients
+        u = coef[-1] * y
+        for c in coef[-2::-1]:
             u = hK @ u
-            u *= c
-            u += y
+            u += c * y
         return u
 
     def propagate(
@@ -330,9 +365,13 @@ class UpwindOperator:
         K = self.generator(sign)
         h = abs(t) / self.num_steps(t)
         y = self._scaled(prev, +1)
-        u = y + (h / 3) * (K @ y)
-        u = y + (h / 2) * (K @ u)
-        u = y + h * (K @ u)
+        hK = K * h
+        coef = self.coefficients  # d/dh p(hK) y = K p'(hK) y
+        deriv = [k * c for k, c in enumerate(coef)][1:]
+        u = deriv[-1] * y
+        for c in deriv[-2::-1]:
+            u = hK @ u
+            u += c * y
         return self._scaled(K @ u, -1)
 
 
