@@ -143,3 +143,18 @@ def test_retarget_changes_only_what_it_is_asked(seed):
     from torch_edgevf.quad.cones import _indices
 
     assert np.array_equal(_indices(v, topo, rotation), target)
+
+
+def test_split_cones_keeps_the_directions_outside_the_split():
+    # the trimesh capsule's faces start at a pole: the root of the dual tree is where the
+    # rotations change, and its kept angle must not turn the field elsewhere
+    import trimesh
+
+    m = trimesh.creation.capsule(height=1.2, radius=0.5, count=[14, 14])
+    v, f = torch.tensor(m.vertices), torch.tensor(m.faces, dtype=torch.int64)
+    topo, field, tree, _ = combed(v, f)
+    out = split_cones(v, topo, field, tree)
+    same = (out.rotation == field.rotation)[topo.face_edges.numpy()].all(1)
+    assert same.sum() > 0.5 * topo.num_faces
+    turn = np.angle(np.exp(4j * (out.angle - field.angle))) / 4
+    assert np.abs(turn[same]).max() < 1e-9

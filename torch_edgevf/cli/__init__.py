@@ -104,7 +104,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="target edge length (default: the mean edge length)",
     )
-    p_quad.add_argument("--field", choices=["curvature", "smoothest"], default="curvature")
+    p_quad.add_argument(
+        "--field",
+        choices=["curvature", "smoothest"],
+        default="curvature",
+        help="curvature: the curvature directions where the curvature is anisotropic, the smoothest "
+        "field where it is near-umbilic (a sphere: the smoothest field); smoothest: the smoothest field",
+    )
     p_quad.add_argument(
         "--sharp-angle",
         type=common.angle,

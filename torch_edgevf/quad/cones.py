@@ -101,6 +101,17 @@ def _with_rotation(verts, topo: Topology, field: CombedField, rotation: np.ndarr
             angle[g] = angle[f] - theta[f, ec[ed, 0]] + theta[g, ec[ed, 1]] + rotation[ed]
         else:
             angle[g] = angle[f] - theta[f, ec[ed, 1]] + theta[g, ec[ed, 0]] - rotation[ed]
+    # the root of a tree may lie where the rotations changed: its angle, kept, would turn
+    # the field everywhere else by the change there. Turn each component back so that the
+    # faces whose rotations did not change keep their directions (the changes add up to
+    # quarter turns around them, so one turn per component does it).
+    same = (rotation == field.rotation)[topo.face_edges.numpy()].all(1)
+    comp = topo.components.numpy()[topo.faces.numpy()[:, 0]]
+    spin = np.exp(4j * (angle - field.angle))
+    for c in np.unique(comp[same]).tolist():
+        turn = np.angle(spin[same & (comp == c)].sum()) / 4
+        if abs(turn) > 1e-9:
+            angle[comp == c] -= turn
     e, _, g, psi = _transported(topo, theta, angle)
     k = (angle[g] - psi - rotation[e]) / _QUARTER
     if np.abs(k - np.rint(k)).max(initial=0) > 1e-6:

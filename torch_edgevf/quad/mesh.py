@@ -4,7 +4,10 @@
 
 1. a cross field (``n = 4``): curvature-aligned (default) or smoothest, constrained along
    the sharp edges (dihedral angle above ``sharp_angle``) and, on open meshes, along the
-   boundary (:mod:`torch_edgevf.fields.design`);
+   boundary (:mod:`torch_edgevf.fields.design`). The default follows the curvature where
+   it is anisotropic and the smoothest field where it is near-umbilic or flat
+   (:mod:`torch_edgevf.quad.field`): a sphere gets the smoothest field's 8 cones, not the
+   noise of its curvature directions;
 2. its integer-grid map (:mod:`torch_edgevf.quad.igm`): cones at integer points, integer
    seam translations, no flipped triangle;
 3. the quads of the map's integer iso-lines (:mod:`torch_edgevf.quad.extract`).
@@ -28,6 +31,7 @@ from .._validation import as_edge_field, as_faces, as_verts, check_vertex_count
 from ..mesh.geometry import dihedral_angles
 from ..mesh.topology import Topology
 from .extract import extract_quads
+from .field import curvature_guide
 from .igm import IntegerGridMap, _grid_map64, with_dtype
 
 __all__ = ["QuadMesh", "quad_mesh", "quad_mesh_report", "QuadMeshReport", "sharp_edges", "save_quad_mesh"]
@@ -121,7 +125,13 @@ def _design(verts, topo, field, sharp, boundary, lam):
     hard = sharp
     if boundary == "hard":
         hard = torch.cat([hard, bnd])
-    guide = designer.curvature() if field == "curvature" else None
+    guide = None
+    if field == "curvature":  # curvature where anisotropic, smoothest elsewhere (.field)
+        smooth = None
+        if hard.numel():  # the smooth field that follows the constrained edges
+            ones = torch.ones(hard.numel(), dtype=torch.complex128)
+            smooth = designer.constrained(edges=hard, values=ones)
+        guide = curvature_guide(designer, smooth)  # None: no anisotropy anywhere
     if boundary == "soft" and bnd.numel():
         w = torch.zeros(topo.num_edges, dtype=torch.complex128)
         scale = float(guide.abs().max()) if guide is not None else 1.0
@@ -162,9 +172,13 @@ def quad_mesh(
     faces : (F, 3) int tensor: a manifold, consistently oriented mesh without zero-area faces
     quads : target number of quads (about ``quads`` vertices on a closed surface), or
     edge_length : target quad edge length; default: the mean edge length of the input
-    field : ``"curvature"`` (the curvature-aligned cross field, thesis 3.4), ``"smoothest"``
-        (3.1), or an (E,) complex tensor: the representation vector of a cross field
-        (``n = 4``) of this mesh, used as given
+    field : ``"curvature"`` (the curvature-aligned cross field, thesis 3.4, softly aligned
+        to the curvature directions weighted by the curvature's anisotropy
+        ``|k1 - k2| / (|k1| + |k2|)``: 0 below 0.1, 1 above 0.3; where the weight is below 1
+        the guide blends towards the smoothest field, and where it is 0 everywhere, as on
+        a sphere, the field is the smoothest one; :mod:`torch_edgevf.quad.field`),
+        ``"smoothest"`` (3.1), or an (E,) complex tensor: the representation vector of a
+        cross field (``n = 4``) of this mesh, used as given
     sharp_angle : edges with a dihedral angle above this (degrees) constrain the field to
         follow them (``None``: no constraint); ignored for a given field
     boundary : required on open meshes: ``"hard"`` (the field follows the boundary edges) or
