@@ -431,14 +431,8 @@ class VertexPairPattern(_OnDevice):
     A face contributes ``values[9 f + 3 a + b]`` at (vertex of corner a, vertex of corner b)
     (face-major, as :class:`Pattern` would take it). The diagonal sums the corners at each
     vertex (one ``index_add``); every off-diagonal entry sums one term from each face of its
-    edge (two gathers); one more gather puts them in sorted COO order.
-
-    Parameters
-    ----------
-    faces : (F, 3) int array
-    edges : (E, 2) int array
-    side_corners : (E, 2) int array, see :meth:`Topology.side_corners`
-    num_vertices : int
+    edge (two gathers); one more gather puts them in sorted COO order. Takes the
+    parameters of :class:`EdgeVertexPattern`.
     """
 
     def __init__(self, faces, edges, side_corners, num_vertices: int):
