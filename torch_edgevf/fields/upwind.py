@@ -313,8 +313,8 @@ class UpwindOperator:
         skew = 0.5 * (self._P - self._P.conj().T)
         self.skew_radius = _largest_eigenvalue((1j * skew).tocsr(), "LM")
         self.damping = _largest_eigenvalue(self._U, "LA")
-        self.coefficients, scale = _best_polynomial(self.skew_radius, self.damping)
-        self.max_step = STEP_MARGIN * scale
+        self.coefficients, stable = _best_polynomial(self.skew_radius, self.damping)
+        self.max_step = STEP_MARGIN * stable
 
     def generator(self, sign: int) -> sp.csr_matrix:
         if sign not in self._K:
