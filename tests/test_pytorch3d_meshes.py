@@ -144,3 +144,27 @@ def test_a_network_takes_a_batch_of_meshes(meshes):
         MeshBatch.from_meshes(meshes, packed[1:], **OPTIONS)
     with pytest.raises(ValueError, match="2 meshes but 1 feature tensors"):
         MeshBatch.from_meshes(meshes, [parts[0]], **OPTIONS)
+
+
+def test_field_design_singularities_transport_and_quads_take_one_mesh():
+    """The field functions take a batch of one mesh in place of ``verts, faces`` (``None``
+    for ``faces`` where more arguments follow) and give what the tensors give."""
+    v, f = ev.icosphere(2)
+    one = FakeMeshes([v], [f])
+    z = ev.smoothest_field(one, n=4)
+    torch.testing.assert_close(z, ev.smoothest_field(v, f, n=4))
+    torch.testing.assert_close(
+        ev.FieldDesigner(one, n=2).smoothest(), ev.FieldDesigner(v, f, n=2).smoothest()
+    )
+    torch.testing.assert_close(ev.curvature_aligned_field(one), ev.curvature_aligned_field(v, f))
+    s, s_ref = ev.singularities(one, None, z, n=4), ev.singularities(v, f, z, n=4)
+    assert torch.equal(s.vertex_index, s_ref.vertex_index) and torch.equal(s.face_index, s_ref.face_index)
+    w = ev.curl_free_field(v, f)
+    torch.testing.assert_close(ev.transport(one, None, w, w, 0.3), ev.transport(v, f, w, w, 0.3))
+    torch.testing.assert_close(ev.project_on_gradients(one, None, w), ev.project_on_gradients(v, f, w))
+    q = ev.quad_mesh(one, quads=300)
+    assert q.quads.shape == ev.quad_mesh(v, f, quads=300).quads.shape
+    with pytest.raises(ValueError, match="takes one mesh"):
+        ev.smoothest_field(FakeMeshes([v, v], [f, f]), n=4)
+    with pytest.raises(ValueError, match="holds its faces"):
+        ev.smoothest_field(one, f, n=4)

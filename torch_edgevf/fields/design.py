@@ -63,7 +63,7 @@ import numpy as np
 import torch
 
 from .._dtypes import complex_dtype
-from .._validation import as_edge_field, as_verts, check_n, check_vertex_count
+from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, single_mesh
 from ..linalg import SparseSolver, eigsh, expm_multiply, solve
 from ..mesh.geometry import (
     FaceGeometry,
@@ -141,7 +141,8 @@ class FieldDesigner:
     >>> z_cross = designer.curvature_aligned()           # doctest: +SKIP
     """
 
-    def __init__(self, verts, faces, n: int = 1):
+    def __init__(self, verts, faces=None, n: int = 1):
+        verts, faces = single_mesh(verts, faces, "FieldDesigner")
         self.n = check_n(n)
         if isinstance(verts, FaceGeometry):  # intrinsic: lengths only (no curvature alignment)
             topo = kernels.intrinsic_topology(verts, faces)
@@ -584,7 +585,7 @@ def _sum_sparse(parts) -> torch.Tensor:
 
 
 def smoothest_field(
-    verts, faces, n: int = 1, *, tol: float | None = None, maxiter: int = 1000
+    verts, faces=None, n: int = 1, *, tol: float | None = None, maxiter: int = 1000
 ) -> torch.Tensor:
     """The smoothest ``n``-direction field of a mesh (thesis 3.1).
 
@@ -607,20 +608,20 @@ def smoothest_field(
     return FieldDesigner(verts, faces, n).smoothest(tol=tol, maxiter=maxiter)
 
 
-def curl_free_field(verts, faces, mu: float = 1.0, n: int = 1) -> torch.Tensor:
+def curl_free_field(verts, faces=None, mu: float = 1.0, n: int = 1) -> torch.Tensor:
     """The smoothest field penalising curl with weight ``mu`` (thesis 3.3); see
     :meth:`FieldDesigner.curl_free`."""
     return FieldDesigner(verts, faces, n).curl_free(mu)
 
 
-def div_free_field(verts, faces, mu: float = 1.0, n: int = 1) -> torch.Tensor:
+def div_free_field(verts, faces=None, mu: float = 1.0, n: int = 1) -> torch.Tensor:
     """The smoothest field penalising divergence (thesis 3.3); see
     :meth:`FieldDesigner.div_free`."""
     return FieldDesigner(verts, faces, n).div_free(mu)
 
 
 def constrained_field(
-    verts, faces, edges=None, values=None, direction_edges=None, directions=None, n: int = 1, **kwargs
+    verts, faces=None, edges=None, values=None, direction_edges=None, directions=None, n: int = 1, **kwargs
 ) -> torch.Tensor:
     """The smoothest field under hard value and direction constraints (thesis 3.4); see
     :meth:`FieldDesigner.constrained`."""
@@ -642,7 +643,7 @@ def heat_diffuse(
 
 
 def curvature_field(
-    verts, faces, n: int = 2, diffusion_time: float | None = None, weighting: str = "integrated"
+    verts, faces=None, n: int = 2, diffusion_time: float | None = None, weighting: str = "integrated"
 ) -> torch.Tensor:
     """The curvature line field (``n = 2``) or cross field (``n = 4``) representation
     vector (thesis 3.4); see :meth:`FieldDesigner.curvature`."""
@@ -651,7 +652,7 @@ def curvature_field(
 
 def curvature_aligned_field(
     verts,
-    faces,
+    faces=None,
     n: int = 4,
     lam: float = 0.0,
     diffusion_time: float | None = None,

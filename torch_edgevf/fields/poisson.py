@@ -118,7 +118,7 @@ class GradientProjector:
     >>> u = proj(z)              # (V,), zero mean on each component
     """
 
-    def __init__(self, verts, faces):
+    def __init__(self, verts, faces=None):
         verts, topo = topology_and_verts(verts, faces)
         self.verts, self.topo = verts, topo
         self._g = gradient(verts, topo)

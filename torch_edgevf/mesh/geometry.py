@@ -24,6 +24,7 @@ from .._validation import (
     check_positions_dtype,
     check_vertex_count,
     list_some,
+    single_mesh,
 )
 from .topology import Topology
 
@@ -386,6 +387,7 @@ def _same_values(a: torch.Tensor, b: torch.Tensor) -> bool:
 
 
 def topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
+    verts, topo = single_mesh(verts, topo, "this function")
     if not isinstance(topo, Topology):
         topo = Topology(topo, num_vertices=None if not hasattr(verts, "shape") else verts.shape[0])
     verts = as_verts(verts)

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from .._dtypes import complex_dtype
-from .._validation import as_edge_field, as_faces, as_verts, check_vertex_count
+from .._validation import as_edge_field, as_faces, as_verts, check_vertex_count, single_mesh
 from ..mesh.geometry import dihedral_angles
 from ..mesh.topology import Topology
 from .extract import extract_quads
@@ -154,7 +154,7 @@ def _design(verts, topo, field, sharp, boundary, lam):
 
 def quad_mesh(
     verts,
-    faces,
+    faces=None,
     quads: int | None = None,
     edge_length: float | None = None,
     field="curvature",
@@ -204,6 +204,7 @@ def quad_mesh(
     >>> q = quad_mesh(verts, faces, quads=1000)       # doctest: +SKIP
     >>> q.quads.shape                                  # doctest: +SKIP
     """
+    verts, faces = single_mesh(verts, faces, "quad_mesh")
     verts, topo = _check_mesh(verts, faces)
     if boundary is not None and boundary not in _BOUNDARY:
         raise ValueError(f"boundary must be one of {_BOUNDARY} or None, got {boundary!r}")
