@@ -242,11 +242,13 @@ def _csr(a: torch.Tensor, scale: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((v, (idx[0], idx[1])), shape=tuple(a.shape))
 
 
-def _polynomial(coef, u: np.ndarray) -> np.ndarray:
-    out = np.full_like(u, coef[-1])
+def _apply_polynomial(coef, hK, y: np.ndarray) -> np.ndarray:
+    """``p(hK) y`` for ``p`` of ``coef`` by Horner's rule, one sparse product per degree."""
+    u = coef[-1] * y
     for c in coef[-2::-1]:
-        out = out * u + c
-    return out
+        u = hK @ u
+        u += c * y
+    return u
 
 
 def stable_scale(coef, s: float, h: float) -> float:
@@ -259,7 +261,7 @@ def stable_scale(coef, s: float, h: float) -> float:
     lo, hi = 0.0, 2.0 * len(coef) / max(s, h)
     for _ in range(50):
         c = 0.5 * (lo + hi)
-        if np.all(np.abs(_polynomial(coef, c * pts)) <= 1 + 1e-12):
+        if np.all(np.abs(np.polyval(coef[::-1], c * pts)) <= 1 + 1e-12):
             lo = c
         else:
             hi = c
@@ -336,15 +338,6 @@ class UpwindOperator:
         s = self.sqrt_mass if power > 0 else 1.0 / self.sqrt_mass
         return z * (s if z.ndim == 1 else s[:, None])
 
-    def _step(self, hK, y: np.ndarray) -> np.ndarray:
-        """``p(hK) y`` by Horner's rule, one sparse product per degree."""
-        coef = self.coefficients
-        u = coef[-1] * y
-        for c in coef[-2::-1]:
-            u = hK @ u
-            u += c * y
-        return u
-
     def propagate(
         self, z: np.ndarray, t: float, sign: int, adjoint: bool = False
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -356,7 +349,7 @@ class UpwindOperator:
         prev = y
         for _ in range(steps):
             prev = y
-            y = self._step(hK, y)
+            y = _apply_polynomial(self.coefficients, hK, y)
         back = -1 if not adjoint else +1
         return self._scaled(y, back), self._scaled(prev, back)
 
@@ -366,13 +359,8 @@ class UpwindOperator:
         h = abs(t) / self.num_steps(t)
         y = self._scaled(prev, +1)
         hK = K * h
-        coef = self.coefficients  # d/dh p(hK) y = K p'(hK) y
-        deriv = [k * c for k, c in enumerate(coef)][1:]
-        u = deriv[-1] * y
-        for c in deriv[-2::-1]:
-            u = hK @ u
-            u += c * y
-        return self._scaled(K @ u, -1)
+        derivative = [k * c for k, c in enumerate(self.coefficients)][1:]  # d/dh p(hK) y = K p'(hK) y
+        return self._scaled(K @ _apply_polynomial(derivative, hK, y), -1)
 
 
 class _Propagate(torch.autograd.Function):
