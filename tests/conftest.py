@@ -189,3 +189,77 @@ def edgevf(*args, cwd=None, timeout=300) -> subprocess.CompletedProcess:
         env=env,
         timeout=timeout,
     )
+
+
+# --------------------------------------------------------------------------- learning tasks
+
+
+def generated_shape(kind: str, rng):
+    """A randomly scaled, slightly noisy ellipsoid, torus, capsule or box (trimesh)."""
+    import trimesh
+
+    a = rng.uniform(0.7, 1.3, size=3)
+    if kind == "ellipsoid":
+        m = trimesh.creation.icosphere(subdivisions=2)
+    elif kind == "torus":
+        m = trimesh.creation.torus(
+            major_radius=1.0, minor_radius=rng.uniform(0.3, 0.5), major_sections=24, minor_sections=12
+        )
+    elif kind == "capsule":
+        m = trimesh.creation.capsule(height=rng.uniform(1.5, 2.5), radius=0.5, count=[16, 16])
+    else:
+        m = trimesh.creation.box(extents=a)
+        m = m.subdivide().subdivide().subdivide()
+    m.vertices = m.vertices * a
+    m.vertices += rng.normal(scale=0.01, size=m.vertices.shape)
+    return m
+
+
+def generated_shapes_task(batch) -> tuple[list, list]:
+    """Four classes of generated shapes, 8 each: 6 for training, 2 for testing. ``batch(v, f,
+    label, dtype)`` makes one mesh's batch."""
+    kinds = ["ellipsoid", "torus", "capsule", "box"]
+    rng = np.random.default_rng(0)
+    data = []
+    for label, kind in enumerate(kinds):
+        for _ in range(8):
+            m = generated_shape(kind, rng)
+            data.append(batch(m.vertices, m.faces, label, dtype=torch.float32))
+    test = data[6::8] + data[7::8]
+    train = [b for i, b in enumerate(data) if i % 8 < 6]
+    return train, test
+
+
+def psb_classes_task(batch) -> tuple[list, list]:
+    """Four PSB classes (human, airplane, table, bird) with the file's split."""
+    from torch_edgevf.learning import datasets
+
+    with np.load(psb_file()) as data:  # each array read once, not once per mesh
+        d = {name: data[name] for name in data.files}
+    train, test = [], []
+    for label, c in enumerate([0, 3, 7, 12]):
+        for i in np.flatnonzero(d["labels"] == c):
+            v, f = datasets.psb_mesh(d, i)
+            v = v.astype(np.float64)
+            (test if d["split"][i] else train).append(batch(v, f, label, dtype=torch.float32))
+    return train, test
+
+
+def train_classifier(net, train, epochs: int, seed: int = 0) -> None:
+    """Adam at 1e-3, one mesh per step, the meshes in a seeded random order each epoch."""
+    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    g = torch.Generator().manual_seed(seed)
+    for _ in range(epochs):
+        for i in torch.randperm(len(train), generator=g).tolist():
+            opt.zero_grad()
+            torch.nn.functional.cross_entropy(net(train[i]), train[i].labels).backward()
+            opt.step()
+
+
+def classification_accuracy(net, batches) -> float:
+    """The fraction of one-mesh batches whose label the network predicts (in evaluation mode)."""
+    net.eval()
+    with torch.no_grad():
+        acc = np.mean([int(net(b).argmax(-1)) == int(b.labels) for b in batches])
+    net.train()
+    return float(acc)

@@ -48,19 +48,17 @@ from torch_edgevf.learning.layers import (
     complex_linear,
     divergence_features,
     gradient_features,
-    invariant_features,
-    pool_edges_to_vertices,
     pool_global,
 )
 from torch_edgevf.learning.models import DiffusionNet, EdgeFieldNet
+from torch_edgevf.learning.models.common import check_batch, check_options, mini_mlp
 from torch_edgevf.learning.models.common import mesh_slices as _mesh_slices
-from torch_edgevf.learning.models.common import mini_mlp
 from torch_edgevf.learning.models.common import per_mesh as _per_mesh
 from torch_edgevf.learning.models.common import project as _project
 from torch_edgevf.learning.models.common import synthesize as _synthesize
+from torch_edgevf.learning.models.common import vertex_invariants as _vertex_invariants
 from torch_edgevf.learning.models.diffusionnet import DiffusionNetBlock
 
-_HEADS = ("global", "vertex", "face")
 _VECTOR = ("edge", "vertex", "none")
 _POOLS = ("mean", "mean_std")
 #: added to the variance before its square root in ``pool="mean_std"`` (a finite gradient
@@ -68,17 +66,11 @@ _POOLS = ("mean", "mean_std")
 _STD_EPS = 1e-6
 
 
-def _check_common(in_channels, out_channels, width, num_blocks, head, pool="mean", log_features=False):
-    for name, v in (
-        ("in_channels", in_channels),
-        ("out_channels", out_channels),
-        ("width", width),
-        ("num_blocks", num_blocks),
-    ):
-        if not isinstance(v, int) or isinstance(v, bool) or v < (0 if name == "num_blocks" else 1):
-            raise ValueError(f"{name} must be a positive integer, got {v!r}")
-    if head not in _HEADS:
-        raise ValueError(f"head must be one of {_HEADS}, got {head!r}")
+def _check_common(
+    in_channels, out_channels, width, num_blocks, head, dropout, pool="mean", log_features=False
+) -> None:
+    """The library networks' checks, and those of the study's readout options."""
+    check_options(in_channels, out_channels, width, num_blocks, head, dropout)
     if pool not in _POOLS:
         raise ValueError(f"pool must be one of {_POOLS}, got {pool!r}")
     if not isinstance(log_features, (bool, int)) or not (
@@ -105,27 +97,6 @@ def _check_dropout(**probabilities) -> None:
     for name, p in probabilities.items():
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p < 1:
             raise ValueError(f"{name} must be a probability in [0, 1), got {p!r}")
-
-
-def _check_batch(batch, in_channels: int, needs: tuple[str, ...] = ()) -> None:
-    f = getattr(batch, "features", None)
-    if not isinstance(f, torch.Tensor) or f.dim() != 2 or f.shape[1] != in_channels:
-        shape = tuple(f.shape) if isinstance(f, torch.Tensor) else type(f).__name__
-        raise ValueError(f"batch.features must be (V, {in_channels}), got {shape}")
-    for name in needs:
-        if getattr(batch, name, None) is None:
-            raise ValueError(f"the model needs batch.{name} (see compute_operators)")
-
-
-def _check_dtype(model: nn.Module, batch) -> None:
-    p = next(model.parameters())
-    for name in ("features", "vertex_mass", "vertex_evecs"):
-        t = getattr(batch, name)
-        if t.dtype != p.dtype:
-            raise ValueError(
-                f"batch.{name} is {t.dtype} but the model's parameters are {p.dtype}: "
-                f"convert one of them (operators.to({p.dtype}) or model.to({t.dtype}))"
-            )
 
 
 def _last_layer(width: int, out_channels: int, head: str, pool: str) -> nn.Linear:
@@ -255,15 +226,6 @@ def _diffuse_vertices(diffusion: LearnedDiffusion, x, batch) -> torch.Tensor:
     return diffusion(
         x, batch.vertex_mass, evals=batch.vertex_evals, evecs=batch.vertex_evecs, offsets=batch.vertex_offsets
     )
-
-
-def _vertex_invariants(u, products, batch, vector: str) -> torch.Tensor:
-    """``tanh Re(u conj(u A))`` of fields ``u``, at the vertices (pooled from the edges for
-    ``vector="edge"``; vertex fields as they are)."""
-    inv = torch.tanh(invariant_features(u, products, modulus=False))
-    if vector == "edge":
-        inv = pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
-    return inv
 
 
 # --------------------------------------------------------------------------- edge-field network
@@ -558,10 +520,9 @@ class StudyEdgeFieldNet(nn.Module):
         field_diffusion: bool = True,
     ):
         super().__init__()
-        _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_common(in_channels, out_channels, width, num_blocks, head, dropout, pool, log_features)
         _check_spectrum(spectrum, head, spectrum_of)
         _check_dropout(
-            dropout=dropout,
             vector_dropout=vector_dropout,
             head_dropout=head_dropout,
             stream_dropout=stream_dropout,
@@ -612,8 +573,7 @@ class StudyEdgeFieldNet(nn.Module):
         needs = {"edge": ("gradient", "edge_evecs"), "vertex": ("vertex_gradient",), "none": ()}[self.vector]
         if self.vector == "edge" and not any(block.field_diffusion is not None for block in self.blocks):
             needs = ("gradient",)
-        _check_batch(batch, self.in_channels, needs)
-        _check_dtype(self, batch)
+        check_batch(self, batch, self.in_channels, needs)
         x, z = self.first(_inputs(self.log_features, batch)), None
         keep = None
         if self.training and self.stream_dropout > 0:
@@ -665,9 +625,9 @@ class StudyDiffusionNet(nn.Module):
         spectrum_of: str = "connection",
     ):
         super().__init__()
-        _check_common(in_channels, out_channels, width, num_blocks, head, pool, log_features)
+        _check_common(in_channels, out_channels, width, num_blocks, head, dropout, pool, log_features)
         _check_spectrum(spectrum, head, spectrum_of)
-        _check_dropout(dropout=dropout, head_dropout=head_dropout)
+        _check_dropout(head_dropout=head_dropout)
         self.in_channels, self.head = in_channels, head
         self.pool, self.log_features = pool, log_features
         self.first = nn.Linear(in_channels, width)
@@ -677,8 +637,7 @@ class StudyDiffusionNet(nn.Module):
         self.spectrum, self.spectrum_of = _spectrum_layer(spectrum, out_channels), spectrum_of
 
     def forward(self, batch):
-        _check_batch(batch, self.in_channels, ("vertex_gradient",))
-        _check_dtype(self, batch)
+        check_batch(self, batch, self.in_channels, ("vertex_gradient",))
         x = self.first(_inputs(self.log_features, batch))
         for block in self.blocks:
             x = block(x, batch)

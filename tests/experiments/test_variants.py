@@ -14,10 +14,17 @@ import pytest
 import torch
 import trimesh
 
-from torch_edgevf.learning import batching, datasets, precompute
+from torch_edgevf.learning import batching, precompute
 from torch_edgevf.learning import models as library
+from torch_edgevf.learning.layers import pool_edges_to_vertices
 
-from conftest import perturbed_icosphere, psb_file
+from conftest import (
+    classification_accuracy,
+    generated_shapes_task,
+    perturbed_icosphere,
+    psb_classes_task,
+    train_classifier,
+)
 from study import variants as models
 
 OPTIONS = dict(k_edge=16, k_vertex=16, vertex_gradient=True)
@@ -155,7 +162,7 @@ def _block_on_the_edges(block, x, z, batch, keep=None):
         u, batch.edge_mass, evals=batch.edge_evals, evecs=batch.edge_evecs, offsets=batch.edge_offsets
     )
     inv = torch.tanh((ud * L.complex_linear(ud, block.products).conj()).real)
-    inv = L.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    inv = pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
     feats = [x, xd, inv]
     if block.divergence:
         dc = L.divergence_features(ud, batch.gradient, batch.vertex_mass)
@@ -346,7 +353,7 @@ def _local_block_on_the_edges(block, x, z, batch):
     u = torch.linalg.solve(torch.diag(batch.edge_mass).to(a.dtype), batch.gradient.to_dense().to(a.dtype) @ a)
     u = u + block.mix(z)
     inv = torch.tanh((u * models.complex_linear(u, block.products).conj()).real)
-    inv = models.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    inv = pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
     dc = -(batch.gradient.to_dense().to(u.dtype).mH @ u) / batch.vertex_mass[:, None]
     feats = [x, xd, inv, torch.tanh(dc.real), torch.tanh(dc.imag)]
     return x + block.mlp(torch.cat(feats, dim=1)), z + u
@@ -520,42 +527,6 @@ def test_missing_operators_are_named(mesh):
 # --------------------------------------------------------------------------- learning
 
 
-def _shape(kind: str, rng) -> trimesh.Trimesh:
-    a = rng.uniform(0.7, 1.3, size=3)
-    if kind == "ellipsoid":
-        m = trimesh.creation.icosphere(subdivisions=2)
-    elif kind == "torus":
-        m = trimesh.creation.torus(
-            major_radius=1.0, minor_radius=rng.uniform(0.3, 0.5), major_sections=24, minor_sections=12
-        )
-    elif kind == "capsule":
-        m = trimesh.creation.capsule(height=rng.uniform(1.5, 2.5), radius=0.5, count=[16, 16])
-    else:
-        m = trimesh.creation.box(extents=a)
-        m = m.subdivide().subdivide().subdivide()
-    m.vertices = m.vertices * a
-    m.vertices += rng.normal(scale=0.01, size=m.vertices.shape)
-    return m
-
-
-def _accuracy(net, batches):
-    net.eval()
-    with torch.no_grad():
-        acc = np.mean([int(net(b).argmax(-1)) == int(b.labels) for b in batches])
-    net.train()
-    return acc
-
-
-def _train(net, train, epochs, seed=0):
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    g = torch.Generator().manual_seed(seed)
-    for _ in range(epochs):
-        for i in torch.randperm(len(train), generator=g).tolist():
-            opt.zero_grad()
-            torch.nn.functional.cross_entropy(net(train[i]), train[i].labels).backward()
-            opt.step()
-
-
 # The recommended network and the previous recommendation (mean and deviation readout, with
 # the divergence and curl).
 LEARNERS = {
@@ -566,75 +537,22 @@ LEARNERS = {
 
 @pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
 def test_edge_field_net_learns_generated_shapes(options):
-    kinds = ["ellipsoid", "torus", "capsule", "box"]
-    rng = np.random.default_rng(0)
-    data = []
-    for label, kind in enumerate(kinds):
-        for _ in range(8):
-            m = _shape(kind, rng)
-            data.append(_batch(m.vertices, m.faces, label, dtype=torch.float32))
-    test = data[6::8] + data[7::8]
-    train = [b for i, b in enumerate(data) if i % 8 < 6]
+    train, test = generated_shapes_task(_batch)
     torch.manual_seed(0)
-    net = models.StudyEdgeFieldNet(
-        8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,), **options
-    )
-    _train(net, train, epochs=15)
-    assert _accuracy(net, test) >= 0.75  # chance: 0.25
-    assert _accuracy(net, train) >= 0.75
+    net = models.StudyEdgeFieldNet(8, 4, width=16, vector_width=8, num_blocks=2, mlp=(16,), **options)
+    train_classifier(net, train, epochs=15)
+    assert classification_accuracy(net, test) >= 0.75  # chance: 0.25
+    assert classification_accuracy(net, train) >= 0.75
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
 def test_edge_field_net_learns_psb_classes(options):
-    with np.load(psb_file()) as data:  # each array read once, not once per mesh
-        d = {name: data[name] for name in data.files}
-    classes = [0, 3, 7, 12]  # human, airplane, table, bird
-    train, test = [], []
-    for label, c in enumerate(classes):
-        for i in np.flatnonzero(d["labels"] == c):
-            v, f = datasets.psb_mesh(d, i)
-            v = v.astype(np.float64)
-            (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
+    train, test = psb_classes_task(_batch)
     torch.manual_seed(0)
-    net = models.StudyEdgeFieldNet(
-        8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,), **options
-    )
-    _train(net, train, epochs=10)
-    assert _accuracy(net, test) >= 0.6  # chance: 0.25
-
-
-# --------------------------------------------------------------------------- one dtype
-
-
-def test_compute_operators_in_the_dtype_asked_for(mesh):
-    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, dtype=torch.float32)
-    assert ops.edge_mass.dtype == torch.float32 and ops.verts.dtype == torch.float32
-    assert ops.gradient.dtype == torch.complex64 and ops.edge_evecs.dtype == torch.complex64
-    with pytest.raises(ValueError, match="dtype"):
-        precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, dtype=torch.float16)
-
-
-def test_collate_names_a_features_and_operators_mismatch(mesh):
-    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4)
-    x = torch.ones(ops.num_vertices, 3, dtype=torch.float32)
-    with pytest.raises(ValueError, match="float32 features but torch.float64 operators"):
-        batching.collate_meshes([batching.MeshSample(ops, x, 0)])
-
-
-@pytest.mark.filterwarnings("error")
-def test_data_loader_workers_print_no_torch_warning(mesh):
-    ops = precompute.compute_operators(*mesh, k_edge=4, k_vertex=4, vertex_gradient=True, dtype=torch.float32)
-    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=3)
-    items = [batching.MeshSample(ops, x, i % 2, index=i) for i in range(4)]
-    loader = torch.utils.data.DataLoader(
-        items, batch_size=2, collate_fn=batching.collate_meshes, num_workers=1
-    )
-    batches = list(loader)  # a warning raised while unpickling in this process fails the test
-    assert [int(b.num_meshes) for b in batches] == [2, 2]
-    assert batches[0].gradient.layout == torch.sparse_coo and batches[0].gradient.is_coalesced()
-    single = batching.collate_meshes(items[:2])
-    torch.testing.assert_close(batches[0].gradient.to_dense(), single.gradient.to_dense())
+    net = models.StudyEdgeFieldNet(8, 4, width=32, vector_width=16, num_blocks=2, mlp=(32,), **options)
+    train_classifier(net, train, epochs=10)
+    assert classification_accuracy(net, test) >= 0.6  # chance: 0.25
 
 
 # --------------------------------------------------------------------------- spectrum readout

@@ -9,12 +9,17 @@ on generated shapes (and on a few PSB classes, slow lane).
 import numpy as np
 import pytest
 import torch
-import trimesh
 
-from torch_edgevf.learning import batching, datasets, layers, models, precompute
+from torch_edgevf.learning import batching, layers, models, precompute
 from torch_edgevf.learning.layers import sparse as layer_checks
 
-from conftest import perturbed_icosphere, psb_file
+from conftest import (
+    classification_accuracy,
+    generated_shapes_task,
+    perturbed_icosphere,
+    psb_classes_task,
+    train_classifier,
+)
 
 OPTIONS = dict(k_edge=16, k_vertex=16, vertex_gradient=True)
 
@@ -271,74 +276,22 @@ def test_missing_operators_are_named(mesh):
 # --------------------------------------------------------------------------- learning
 
 
-def _shape(kind: str, rng) -> trimesh.Trimesh:
-    a = rng.uniform(0.7, 1.3, size=3)
-    if kind == "ellipsoid":
-        m = trimesh.creation.icosphere(subdivisions=2)
-    elif kind == "torus":
-        m = trimesh.creation.torus(
-            major_radius=1.0, minor_radius=rng.uniform(0.3, 0.5), major_sections=24, minor_sections=12
-        )
-    elif kind == "capsule":
-        m = trimesh.creation.capsule(height=rng.uniform(1.5, 2.5), radius=0.5, count=[16, 16])
-    else:
-        m = trimesh.creation.box(extents=a)
-        m = m.subdivide().subdivide().subdivide()
-    m.vertices = m.vertices * a
-    m.vertices += rng.normal(scale=0.01, size=m.vertices.shape)
-    return m
-
-
-def _accuracy(net, batches):
-    net.eval()
-    with torch.no_grad():
-        acc = np.mean([int(net(b).argmax(-1)) == int(b.labels) for b in batches])
-    net.train()
-    return acc
-
-
-def _train(net, train, epochs, seed=0):
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    g = torch.Generator().manual_seed(seed)
-    for _ in range(epochs):
-        for i in torch.randperm(len(train), generator=g).tolist():
-            opt.zero_grad()
-            torch.nn.functional.cross_entropy(net(train[i]), train[i].labels).backward()
-            opt.step()
-
-
 def test_edge_field_net_learns_generated_shapes():
-    kinds = ["ellipsoid", "torus", "capsule", "box"]
-    rng = np.random.default_rng(0)
-    data = []
-    for label, kind in enumerate(kinds):
-        for _ in range(8):
-            m = _shape(kind, rng)
-            data.append(_batch(m.vertices, m.faces, label, dtype=torch.float32))
-    test = data[6::8] + data[7::8]
-    train = [b for i, b in enumerate(data) if i % 8 < 6]
+    train, test = generated_shapes_task(_batch)
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, len(kinds), width=16, vector_width=8, num_blocks=2, mlp=(16,))
-    _train(net, train, epochs=15)
-    assert _accuracy(net, test) >= 0.75  # chance: 0.25
-    assert _accuracy(net, train) >= 0.75
+    net = models.EdgeFieldNet(8, 4, width=16, vector_width=8, num_blocks=2, mlp=(16,))
+    train_classifier(net, train, epochs=15)
+    assert classification_accuracy(net, test) >= 0.75  # chance: 0.25
+    assert classification_accuracy(net, train) >= 0.75
 
 
 @pytest.mark.slow
 def test_edge_field_net_learns_psb_classes():
-    with np.load(psb_file()) as data:  # each array read once, not once per mesh
-        d = {name: data[name] for name in data.files}
-    classes = [0, 3, 7, 12]  # human, airplane, table, bird
-    train, test = [], []
-    for label, c in enumerate(classes):
-        for i in np.flatnonzero(d["labels"] == c):
-            v, f = datasets.psb_mesh(d, i)
-            v = v.astype(np.float64)
-            (test if d["split"][i] else train).append(_batch(v, f, label, dtype=torch.float32))
+    train, test = psb_classes_task(_batch)
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, len(classes), width=32, vector_width=16, num_blocks=2, mlp=(32,))
-    _train(net, train, epochs=10)
-    assert _accuracy(net, test) >= 0.6  # chance: 0.25
+    net = models.EdgeFieldNet(8, 4, width=32, vector_width=16, num_blocks=2, mlp=(32,))
+    train_classifier(net, train, epochs=10)
+    assert classification_accuracy(net, test) >= 0.6  # chance: 0.25
 
 
 # --------------------------------------------------------------------------- one dtype

@@ -230,10 +230,15 @@ def gradient_values(geom: FaceGeometry, signs: torch.Tensor) -> torch.Tensor:
 
 
 def covariant_values(
-    geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor, n: int = 1
+    geom: FaceGeometry, signs: torch.Tensor, w_pairs: torch.Tensor, n: int = 1, transports=None
 ) -> torch.Tensor:
-    r = pair_transport(geom, signs, 1)
-    rn = r if n == 1 else pair_transport(geom, signs, n)
+    """The values of ``D_w``; ``transports`` = ``(r, r^n)`` of :func:`pair_transport` when the
+    caller has them."""
+    if transports is None:
+        r = pair_transport(geom, signs, 1)
+        rn = r if n == 1 else pair_transport(geom, signs, n)
+    else:
+        r, rn = transports
     scale = -pair_columns(signs * geom.lengths, "b") / 3
     return (scale * (w_pairs * r).imag * rn.conj()).flatten()
 
@@ -278,6 +283,7 @@ def vertex_mass_from(geom: FaceGeometry, topo: Topology, lumped: bool) -> torch.
     return cached_pattern(topo, "VV").assemble(vals.flatten())
 
 
-def covariant_from(geom, signs, topo, w, n: int = 1) -> torch.Tensor:
+def covariant_from(geom, signs, topo, w, n: int = 1, transports=None) -> torch.Tensor:
     w_pairs = w[pair_columns(topo.face_edges.to(w.device), "a")]
-    return cached_pattern(topo, "EE").assemble_pairs(covariant_values(geom, signs, w_pairs, n))
+    values = covariant_values(geom, signs, w_pairs, n, transports)
+    return cached_pattern(topo, "EE").assemble_pairs(values)
