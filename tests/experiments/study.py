@@ -1,4 +1,5 @@
-"""The modules of the PSB study (``experiments/psb_classification``), for its tests.
+"""The modules of the PSB study (``experiments/psb_classification``), and two readers of its
+outputs, for its tests.
 
 ``run`` is the study's command (``run.py``) and ``variants`` its networks; both are
 scripts beside each other, imported here as top-level modules.
@@ -14,4 +15,17 @@ sys.path.insert(0, str(STUDY))
 import run  # noqa: E402
 import variants  # noqa: E402
 
-__all__ = ["STUDY", "run", "variants"]
+__all__ = ["STUDY", "run", "variants", "euler_of_closed", "paired_rows"]
+
+
+def euler_of_closed(dataset):
+    """The Euler characteristic of each closed mesh of ``dataset``: V - E + F with E = 3F/2."""
+    import numpy as np
+
+    return np.array([len(v) - len(f) // 2 for v, f in dataset["meshes"]])
+
+
+def paired_rows(markdown: str) -> dict[str, list[str]]:
+    """The rows of the study's ``paired_table``: model name -> its other cells."""
+    cells = ([c.strip() for c in line.strip("|").split("|")] for line in markdown.splitlines())
+    return {c[0]: c[1:] for c in cells if len(c) > 1 and c[0] not in ("model", "---")}
