@@ -334,7 +334,9 @@ def eigsh(
         time a block's worth of converged Ritz values coincide -- the trace that a block
         Lanczos leaves of a higher multiplicity -- so that the clusters of up to 5 or 6
         equal eigenvalues of symmetric meshes (icospheres) are found, while meshes
-        without multiple eigenvalues keep the cheaper small block.  ``k = 1`` (without
+        without multiple eigenvalues keep the cheaper small block; from ``k = 64`` on,
+        the largest block from the start (with a large basis, fewer solves of more
+        vectors each are cheaper).  ``k = 1`` (without
         ``block_size``) uses the single-vector fast path (Rayleigh-Ritz accelerated
         inverse iteration), stopping on the same residual tolerance; it returns the better
         of the Ritz and the harmonic Ritz vector, whose residual in ``A x = lambda M x`` is

@@ -45,6 +45,10 @@ METHODS = ("auto", "lanczos", "dense")
 _DENSE_MAX = 300
 _DENSE_MAX_MANY = 4000  # (a dense complex matrix of this size: 256 MB)
 _MAX_BLOCK = 6
+#: from this many eigenpairs on, the Lanczos block starts at its largest size: with a large
+#: basis, fewer solves of more vectors each cost less (128 pairs of the Laplacian of a
+#: 5,000-vertex RNA surface: 12-18% less time; 32 pairs: 15% more)
+_LARGE_K = 64
 _SHIFT_EPS = 1e-5
 
 
@@ -315,7 +319,11 @@ def shift_invert_eigsh(A, M, sigma, k, *, tol, maxiter, ncv, v0, block_size):
         Y, KY = _better_of(Y, lambda Z: K @ Z, None if s is not None else lambda Z: M @ Z)
     else:
         KY = None
-        block, max_block = (block_size, block_size) if block_size else (min(k, 2), min(k, _MAX_BLOCK))
+        if block_size:
+            block = max_block = block_size
+        else:
+            max_block = min(k, _MAX_BLOCK)
+            block = max_block if k >= _LARGE_K else min(k, 2)
         _, Y, n_op = _lanczos(
             op,
             inner,
