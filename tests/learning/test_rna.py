@@ -1,5 +1,6 @@
 """The RNA reader keeps every vertex's label and maps it to the network's mesh; the sample trains."""
 
+import importlib.util
 import json
 import shutil
 
@@ -20,6 +21,12 @@ from torch_edgevf.learning.models import EdgeFieldNet
 from torch_edgevf.learning.precompute import compute_operators
 
 from conftest import shared_path
+
+#: decimation (``target_vertices``) needs the ``prepare`` extra (fast-simplification)
+needs_decimator = pytest.mark.skipif(
+    importlib.util.find_spec("fast_simplification") is None,
+    reason="decimation needs fast-simplification: pip install 'torch_edgevf[prepare]'",
+)
 
 
 @pytest.fixture(scope="module")
@@ -64,6 +71,7 @@ def test_unreferenced_and_non_manifold_vertices_go_through(sample):
     assert int((ops.vertex_evals < 1e-8).sum()) == mesh.report["components"]
 
 
+@needs_decimator
 def test_decimated_mesh_maps_every_vertex(sample):
     verts, faces, labels = read_rna_mesh(sample, "5J8A_DB")
     mesh = prepare_rna_mesh(verts, faces, labels, "5J8A_DB", target_vertices=2000)
@@ -104,10 +112,11 @@ def test_bad_folder_and_labels_are_named(sample, tmp_path, monkeypatch):
     (root / "labels" / "4V48_A9.txt").write_text("1\n2\n")
     with pytest.raises(ValueError, match="4V48_A9: 2 labels for 681 vertices"):
         read_rna_mesh(root, "4V48_A9")
-    ds = RNADataset(root, ["4V48_A9", "3CXC_9"], target_vertices=500, k_edge=4, k_vertex=16)
+    ds = RNADataset(root, ["4V48_A9", "3CXC_9"], target_vertices=None, k_edge=4, k_vertex=16)
     assert [m.name for m in ds.meshes] == ["3CXC_9"] and ds.skipped[0][0] == "4V48_A9"
 
 
+@needs_decimator
 def test_a_few_epochs_learn_well_above_the_majority_class(sample):
     torch.manual_seed(0)
     train = rna_split(sample)["train"]
