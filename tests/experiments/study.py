@@ -8,6 +8,8 @@ scripts beside each other, imported here as top-level modules.
 import sys
 from pathlib import Path
 
+import numpy as np
+
 #: the study's folder
 STUDY = Path(__file__).resolve().parents[2] / "experiments" / "psb_classification"
 sys.path.insert(0, str(STUDY))
@@ -18,10 +20,8 @@ import variants  # noqa: E402
 __all__ = ["STUDY", "run", "variants", "euler_of_closed", "paired_rows"]
 
 
-def euler_of_closed(dataset):
+def euler_of_closed(dataset) -> np.ndarray:
     """The Euler characteristic of each closed mesh of ``dataset``: V - E + F with E = 3F/2."""
-    import numpy as np
-
     return np.array([len(v) - len(f) // 2 for v, f in dataset["meshes"]])
 
 

@@ -1,6 +1,5 @@
 """The RNA reader keeps every vertex's label and maps it to the network's mesh; the sample trains."""
 
-import importlib.util
 import json
 import shutil
 
@@ -21,12 +20,6 @@ from torch_edgevf.learning.models import EdgeFieldNet
 from torch_edgevf.learning.precompute import compute_operators
 
 from conftest import shared_path
-
-#: decimation (``target_vertices``) needs the ``prepare`` extra (fast-simplification)
-needs_decimator = pytest.mark.skipif(
-    importlib.util.find_spec("fast_simplification") is None,
-    reason="decimation needs fast-simplification: pip install 'torch_edgevf[prepare]'",
-)
 
 
 @pytest.fixture(scope="module")
@@ -71,8 +64,8 @@ def test_unreferenced_and_non_manifold_vertices_go_through(sample):
     assert int((ops.vertex_evals < 1e-8).sum()) == mesh.report["components"]
 
 
-@needs_decimator
 def test_decimated_mesh_maps_every_vertex(sample):
+    pytest.importorskip("fast_simplification")  # decimation: the [prepare] extra
     verts, faces, labels = read_rna_mesh(sample, "5J8A_DB")
     mesh = prepare_rna_mesh(verts, faces, labels, "5J8A_DB", target_vertices=2000)
     assert 1800 <= len(mesh.verts) <= 2200
@@ -116,8 +109,8 @@ def test_bad_folder_and_labels_are_named(sample, tmp_path, monkeypatch):
     assert [m.name for m in ds.meshes] == ["3CXC_9"] and ds.skipped[0][0] == "4V48_A9"
 
 
-@needs_decimator
 def test_a_few_epochs_learn_well_above_the_majority_class(sample):
+    pytest.importorskip("fast_simplification")  # decimation: the [prepare] extra
     torch.manual_seed(0)
     train = rna_split(sample)["train"]
     ds = RNADataset(sample, train, target_vertices=600, k_edge=16, k_vertex=48)
