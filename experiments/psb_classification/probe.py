@@ -31,8 +31,9 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import run as bench  # noqa: E402
+import psb_data  # noqa: E402
 
+from torch_edgevf.learning.datasets import psb_path  # noqa: E402
 from torch_edgevf.learning.layers import gradient_features, spectral_diffusion  # noqa: E402
 
 FEATURE_SETS = {
@@ -103,24 +104,24 @@ def main(argv=None) -> list[dict]:
     p.add_argument("--quick", action="store_true", help="4 classes, 8 meshes each, 2 folds")
     a = p.parse_args(argv)
     try:
-        data = bench.psb_path(a.data)
+        data = psb_path(a.data)
     except ValueError as e:
         p.error(str(e))
     cache = a.cache or os.environ.get(
         "TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "operators")
     )
     torch.set_num_threads(1)
-    dataset = bench.load_psb(data)
+    dataset = psb_data.load_psb(data)
     if a.quick:
-        dataset = bench.subset(dataset, classes=4, per_class=8)
+        dataset = psb_data.subset(dataset, classes=4, per_class=8)
         a.folds = 2
-    batches, _ = bench.precompute(dataset, cache)
+    batches, _ = psb_data.precompute(dataset, cache)
     per_mesh = [mesh_features(b) for b in batches]
     features = {k: torch.stack([f[k] for f, _ in per_mesh]) for k in per_mesh[0][0]}
     kept = [e for _, e in per_mesh]
     labels = torch.as_tensor(dataset["labels"], dtype=torch.int64)
     classes = len(dataset["classes"])
-    evaluations = bench.splits(dataset, 0, None) + bench.splits(dataset, a.folds, None)
+    evaluations = psb_data.splits(dataset, 0, None) + psb_data.splits(dataset, a.folds, None)
     print(
         f"energy of the edge gradient fields kept by the projection on {batches[0].edge_evecs.shape[1]} "
         f"eigenvectors of L_c: median {statistics.median(kept):.2f} over meshes "

@@ -1,51 +1,47 @@
 """experiments/psb_classification/run.py: its quick run, its splits, its options and its argument errors."""
 
 import json
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
 import trimesh
 
-from study import euler_of_closed, paired_rows, run, variants
+from torch_edgevf.learning.cache import OperatorCache
+
+from study import euler_of_closed, paired_rows, psb_data, psb_report, psb_training, variants
+from study import run as command
 
 #: the study's README: its tables, its reading and its report
 README = "experiments/psb_classification/README.md"
 
 
-@pytest.fixture(scope="module")
-def bench():
-    """The study's command, ``experiments/psb_classification/run.py``."""
-    return run
-
-
 @pytest.mark.slow
-def test_quick_run_writes_every_field_and_a_table(bench, psb, tmp_path, capsys):
+def test_quick_run_writes_every_field_and_a_table(psb, tmp_path, capsys):
     out = tmp_path / "runs.json"
-    results = bench.main(
+    results = command.main(
         ["--quick", "--cache", str(tmp_path / "cache"), "--threads", "1", "--json", str(out)]
     )
     saved = json.loads(out.read_text())
-    assert [r["model"] for r in saved] == list(bench.DEFAULT_MODELS) == [r["model"] for r in results]
+    assert [r["model"] for r in saved] == list(psb_report.DEFAULT_MODELS) == [r["model"] for r in results]
     for r in saved:
         assert set(r) >= {"test_accuracy", "train_accuracy", "train_seconds", "parameters", "seed", "split"}
         assert 0 <= r["test_accuracy"] <= 1 and r["train_seconds"] > 0 and r["parameters"] > 10_000
     printed = capsys.readouterr().out
     assert "| edgefieldnet-nodiv-meanpool |" in printed and "| diffusionnet-nodropout |" in printed
     assert "operators: 32 meshes, 32 computed" in printed
-    assert bench.main(["--table", str(out)]) == saved
+    assert command.main(["--table", str(out)]) == saved
     # --device cpu (the default, named) trains the same networks to the same numbers
-    named = bench.main(["--quick", "--cache", str(tmp_path / "cache"), "--threads", "1", "--device", "cpu"])
+    named = command.main(["--quick", "--cache", str(tmp_path / "cache"), "--threads", "1", "--device", "cpu"])
     for r, s in zip(results, named):
         assert r["test_predictions"] == s["test_predictions"]
         assert r["train_accuracy"] == s["train_accuracy"]
 
 
 @pytest.mark.slow
-def test_profile_prints_the_operators_of_ten_training_steps(bench, psb, tmp_path, capsys):
+def test_profile_prints_the_operators_of_ten_training_steps(psb, tmp_path, capsys):
     argv = ["--quick", "--profile", "--models", "edgefieldnet-nodiv-meanpool", "--threads", "1"]
-    bench.main([*argv, "--cache", str(tmp_path / "cache")])
+    command.main([*argv, "--cache", str(tmp_path / "cache")])
     printed = capsys.readouterr().out
     head, _, profile = printed.partition("one training step of edgefieldnet-nodiv-meanpool (10 steps):")
     assert profile and "| edgefieldnet-nodiv-meanpool |" in head
@@ -54,44 +50,44 @@ def test_profile_prints_the_operators_of_ten_training_steps(bench, psb, tmp_path
     assert adam.split()[-1] == "10"  # one optimiser step per profiled training step
 
 
-def test_folds_are_stratified_and_cover_every_mesh_once(bench):
+def test_folds_are_stratified_and_cover_every_mesh_once():
     labels = np.repeat(np.arange(5), 20)
     dataset = {"labels": labels, "split": np.zeros(100, dtype=int)}
-    evaluations = bench.splits(dataset, 5, None)
+    evaluations = psb_data.splits(dataset, 5, None)
     assert all((train == ~test).all() for _, train, test in evaluations)
     masks = [test for _, _, test in evaluations]
     assert (np.sum(masks, axis=0) == 1).all()
     for m in masks:
         assert (np.bincount(labels[m], minlength=5) == 4).all()
-    assert len(bench.splits(dataset, 0, None)) == 1
+    assert len(psb_data.splits(dataset, 0, None)) == 1
     # another partition: other folds, as stratified; partition 0 is the default
-    again = bench.splits(dataset, 5, None, partition=0)
+    again = psb_data.splits(dataset, 5, None, partition=0)
     assert all((a[2] == b[2]).all() for a, b in zip(evaluations, again))
-    other = [test for _, _, test in bench.splits(dataset, 5, None, partition=1)]
+    other = [test for _, _, test in psb_data.splits(dataset, 5, None, partition=1)]
     assert (np.sum(other, axis=0) == 1).all()
     assert all((np.bincount(labels[m], minlength=5) == 4).all() for m in other)
     assert any((m != o).any() for m, o in zip(masks, other))
 
 
-def test_split_file_is_checked(bench, tmp_path):
+def test_split_file_is_checked(tmp_path):
     dataset = {"labels": np.zeros(10, dtype=int), "split": np.zeros(10, dtype=int)}
     good, bad = tmp_path / "good.npy", tmp_path / "bad.npy"
     np.save(good, np.array([0, 1, -1, 1, 0, 0, 1, 0, -1, 0]))
     np.save(bad, np.array([0, 2] * 5))
-    ((name, train, test),) = bench.splits(dataset, 0, good)
+    ((name, train, test),) = psb_data.splits(dataset, 0, good)
     assert name == "split" and test.sum() == 3 and train.sum() == 5  # -1: in neither
     with pytest.raises(ValueError, match="0 \\(train\\), 1 \\(test\\) or -1 \\(left out\\)"):
-        bench.splits(dataset, 0, bad)
+        psb_data.splits(dataset, 0, bad)
     np.save(bad, np.array([0, -1] * 5))
     with pytest.raises(ValueError, match="at least one training"):
-        bench.splits(dataset, 0, bad)
+        psb_data.splits(dataset, 0, bad)
 
 
-def test_validation_split_leaves_the_test_meshes_out(bench):
+def test_validation_split_leaves_the_test_meshes_out():
     labels = np.repeat(np.arange(3), 20)
     split = np.tile(np.r_[np.zeros(16, int), np.ones(4, int)], 3)
     ids = np.arange(60)[::-1].copy()  # ids against the file's order
-    ((name, train, test),) = bench.splits({"labels": labels, "split": split, "ids": ids}, 0, None, True)
+    ((name, train, test),) = psb_data.splits({"labels": labels, "split": split, "ids": ids}, 0, None, True)
     assert name == "validation"
     assert not (train & test).any() and not ((train | test) & (split == 1)).any()
     assert (np.bincount(labels[test]) == 4).all() and (np.bincount(labels[train]) == 12).all()
@@ -101,7 +97,7 @@ def test_validation_split_leaves_the_test_meshes_out(bench):
         assert (train | test)[tr].all()
 
 
-def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack(bench):
+def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack():
     """Spheres train; a torus tests where its class has spheres; a class without spheres
     trains whole."""
     sphere = trimesh.creation.icosphere(1)
@@ -112,27 +108,27 @@ def test_topology_shift_tests_each_class_on_topologies_its_training_meshes_lack(
             meshes.append((np.asarray(m.vertices), np.asarray(m.faces)))
             labels.append(label)
     dataset = {"meshes": meshes, "labels": np.array(labels), "split": np.zeros(len(labels), int)}
-    flags = bench.topology_shift_flags(dataset)
+    flags = psb_data.topology_shift_flags(dataset)
     np.testing.assert_array_equal(flags, [0, 0, 1, 0, 0, 0, 1, 0])
-    ((name, train, test),) = bench.splits(dataset, 0, None, topology_shift=True)
+    ((name, train, test),) = psb_data.splits(dataset, 0, None, topology_shift=True)
     assert name == "topology"
     np.testing.assert_array_equal(test, flags == 1)
     np.testing.assert_array_equal(train, flags == 0)
     # within the fixed split's training meshes: its test meshes are left out
     dataset["split"] = np.array([0, 1, 0, 0, 0, 1, 0, 1])
-    flags = bench.topology_shift_flags(dataset, validation=True)
+    flags = psb_data.topology_shift_flags(dataset, validation=True)
     np.testing.assert_array_equal(flags, [0, -1, 1, 0, 0, -1, 1, -1])
-    ((name, train, test),) = bench.splits(dataset, 0, None, validation=True, topology_shift=True)
+    ((name, train, test),) = psb_data.splits(dataset, 0, None, validation=True, topology_shift=True)
     assert name == "topology validation"
     np.testing.assert_array_equal(test, flags == 1)
     np.testing.assert_array_equal(train, flags == 0)
 
 
-def test_topology_shift_of_the_psb_file(bench, psb):
+def test_topology_shift_of_the_psb_file(psb):
     """On PSB: 39 test meshes in 9 classes (16 cups with a handle, 12 vases, the 3 bearings
     with holes, ...), each of a topology no training mesh of its class has."""
-    dataset = bench.load_psb(psb)
-    flags = bench.topology_shift_flags(dataset)
+    dataset = psb_data.load_psb(psb)
+    flags = psb_data.topology_shift_flags(dataset)
     labels = dataset["labels"]
     euler = euler_of_closed(dataset)
     assert flags.sum() == 39 and len(set(labels[flags == 1])) == 9
@@ -142,7 +138,7 @@ def test_topology_shift_of_the_psb_file(bench, psb):
     assert (classes[labels[flags == 1]] == "cup").sum() == 16
     assert sorted(euler[(classes[labels] == "bearing") & (flags == 1)]) == [-10, -6, -6]
     # for choosing a design: 31 of them are fixed-split training meshes, none of the bearings
-    within = bench.topology_shift_flags(dataset, validation=True)
+    within = psb_data.topology_shift_flags(dataset, validation=True)
     assert (within == 1).sum() == 31 and (within == 0).sum() == 304 - 31
     assert not (within[dataset["split"] == 1] + 1).any()
     assert "bearing" not in classes[labels[within == 1]]
@@ -179,21 +175,21 @@ def test_topology_shift_of_the_psb_file(bench, psb):
         (["--device", "nonsense"], "'nonsense' is not a device"),
     ],
 )
-def test_argument_errors(bench, argv, message, capsys, monkeypatch, tmp_path):
+def test_argument_errors(argv, message, capsys, monkeypatch, tmp_path):
     monkeypatch.delenv("TORCH_EDGEVF_PSB", raising=False)
     data = [] if message == "TORCH_EDGEVF_PSB" else ["--data", str(tmp_path / "x.npz")]
     (tmp_path / "runs.json").write_text("[]")
     argv = [a.format(runs=tmp_path / "runs.json") for a in argv]
     with pytest.raises(SystemExit) as exc:
-        bench.main(data + argv)
+        command.main(data + argv)
     assert exc.value.code == 2 and message in capsys.readouterr().err
 
 
 @pytest.mark.slow
-def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, capsys):
+def test_step_time_alternates_the_models_and_gives_ratios(psb, tmp_path, capsys):
     out = tmp_path / "steps.json"
     argv = ["--step-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1", "--json", str(out)]
-    results = bench.main(argv)
+    results = command.main(argv)
     assert [r["model"] for r in results] == ["edgefieldnet-nodiv-meanpool", "diffusionnet-nodropout"]
     for r in results:
         assert len(r["seconds_per_step"]) == 3 and all(0 < t < 60 for t in r["seconds_per_step"])
@@ -204,39 +200,39 @@ def test_step_time_alternates_the_models_and_gives_ratios(bench, psb, tmp_path, 
     assert "mean vs diffusionnet-nodropout 1.00" in printed
 
 
-def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has(bench):
+def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has():
     """DiffusionNet's public classification script builds it without dropout: the default
     baseline; ``diffusionnet`` keeps the class's default, dropout 0.5 in every block's MLP.
     The ``-nodropout`` edge-field networks have none either."""
-    assert bench.BASELINE == "diffusionnet-nodropout"
-    assert bench.DEFAULT_MODELS == ("edgefieldnet-nodiv-meanpool", bench.BASELINE)
+    assert psb_report.BASELINE == "diffusionnet-nodropout"
+    assert psb_report.DEFAULT_MODELS == ("edgefieldnet-nodiv-meanpool", psb_report.BASELINE)
 
     def dropouts(name):
-        return [m.p for m in bench.MODELS[name](16, 19, True).modules() if isinstance(m, torch.nn.Dropout)]
+        return [m.p for m in variants.MODELS[name](16, 19, True).modules() if isinstance(m, torch.nn.Dropout)]
 
-    assert dropouts(bench.BASELINE) == []
+    assert dropouts(psb_report.BASELINE) == []
     assert dropouts("diffusionnet") == [0.5] * 8  # 4 blocks, 2 hidden layers each
     assert dropouts("edgefieldnet-nodropout") == dropouts("edgefieldnet-vec8-nodropout") == []
     assert dropouts("edgefieldnet") == [0.5] * 6  # 3 blocks, 2 hidden layers each
-    assert bench._base({"edgefieldnet", "diffusionnet", bench.BASELINE}) == bench.BASELINE
-    assert bench._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
+    assert psb_report._base({"edgefieldnet", "diffusionnet", psb_report.BASELINE}) == psb_report.BASELINE
+    assert psb_report._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
 
 
-def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_spectrum_only(bench):
+def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_spectrum_only():
     """``edgefieldnet-spectrum`` is the recommended network and
     ``diffusionnet-nodropout-spectrum`` the faithful DiffusionNet, seed for seed, plus the
     same linear map of the ``K_EDGE`` eigenvalues of ``L_c``; ``-lbspectrum`` takes those
     of the vertex Laplacian."""
     for name, base in (
         ("edgefieldnet-spectrum", "edgefieldnet"),
-        (bench.BASELINE + "-spectrum", bench.BASELINE),
-        (bench.BASELINE + "-lbspectrum", bench.BASELINE),
+        (psb_report.BASELINE + "-spectrum", psb_report.BASELINE),
+        (psb_report.BASELINE + "-lbspectrum", psb_report.BASELINE),
     ):
         torch.manual_seed(0)
         net = variants.STUDY_MODELS[name](16, 19, True)
         torch.manual_seed(0)
         ref = variants.STUDY_MODELS[base](16, 19, True).state_dict()
-        assert (net.spectrum.in_features, net.spectrum.out_features) == (bench.K_EDGE, 19)
+        assert (net.spectrum.in_features, net.spectrum.out_features) == (variants.K_EDGE, 19)
         assert net.spectrum_of == ("laplacian" if "lbspectrum" in name else "connection")
         rest = {k: w for k, w in net.state_dict().items() if not k.startswith("spectrum.")}
         assert rest.keys() == ref.keys() and all(torch.equal(w, ref[k]) for k, w in rest.items())
@@ -253,7 +249,7 @@ def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_s
         "edgefieldnet-nodiv",
     ],
 )
-def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(bench, base):
+def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(base):
     """``edgefieldnet-meanpool-X`` (``edgefieldnet-local-meanpool``,
     ``edgefieldnet-nodiv-meanpool``) is ``edgefieldnet-X`` (``edgefieldnet-local``,
     ``edgefieldnet-nodiv``) with ``pool="mean"``: the same layers, parameters and buffers,
@@ -275,7 +271,7 @@ def test_the_readout_variants_differ_from_their_bases_by_the_readout_only(bench,
     assert layers(net) == layers(ref)
 
 
-def test_the_frozen_time_ablation_differs_from_its_base_by_the_times_only(bench):
+def test_the_frozen_time_ablation_differs_from_its_base_by_the_times_only():
     """``edgefieldnet-nodiv-meanpool-fixedtime`` is ``edgefieldnet-nodiv-meanpool`` with
     the diffusion times frozen: the same parameters, of which only the times stop
     learning, initialised alike from one seed."""
@@ -291,9 +287,9 @@ def test_the_frozen_time_ablation_differs_from_its_base_by_the_times_only(bench)
 
 
 @pytest.mark.slow
-def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, capsys):
+def test_precompute_time_alternates_diffusionnet_and_ours(psb, tmp_path, capsys):
     pytest.importorskip("robust_laplacian")
-    results = bench.main(["--precompute-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
+    results = command.main(["--precompute-time", "2", "--cache", str(tmp_path / "cache"), "--threads", "1"])
     assert [r["model"] for r in results] == ["diffusionnet", "edgefieldnet"]
     for r in results:
         assert len(r["seconds_per_mesh"]) == 3 and all(0 < t < 60 for t in r["seconds_per_mesh"])
@@ -303,10 +299,10 @@ def test_precompute_time_alternates_diffusionnet_and_ours(bench, psb, tmp_path, 
 
 
 @pytest.mark.slow
-def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
+def test_only_folds_runs_just_the_folds_asked_for(psb, tmp_path):
     argv = ["--quick", "--models", "edgefieldnet-scalar", "--folds", "4", "--only-folds", "3,1"]
     argv += ["--partition", "2"]
-    results = bench.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
+    results = command.main(argv + ["--cache", str(tmp_path / "cache"), "--threads", "1", "--epochs", "1"])
     assert [r["split"] for r in results] == ["fold1", "fold3"]
     assert [r["partition"] for r in results] == [2, 2]  # recorded, so --paired keeps it apart
     first, second = (set(r["test_meshes"]) for r in results)  # the meshes of test_predictions
@@ -314,38 +310,39 @@ def test_only_folds_runs_just_the_folds_asked_for(bench, psb, tmp_path):
     assert all(len(r["test_predictions"]) == len(r["test_meshes"]) for r in results)
 
 
-def test_table_keeps_fixed_folds_and_validation_apart(bench):
+def test_table_keeps_fixed_folds_and_validation_apart():
     def run(split, acc):
         return dict(
             model="m", split=split, test_accuracy=acc, train_seconds=1.0, seconds_per_step=0.1, parameters=7
         )
 
     rows = [run("fixed", 0.5), run("fold0", 0.75), run("fold1", 0.25), run("validation", 1.0)]
-    lines = bench.table(rows, ["m"]).splitlines()
+    lines = psb_report.table(rows, ["m"]).splitlines()
     assert "validation or own split" in lines[0]
     cells = [c.strip() for c in lines[2].strip("|").split("|")]
     assert cells[1:4] == ["0.500 ± 0.000 (n=1)", "0.500 ± 0.354 (n=2)", "1.000 ± 0.000 (n=1)"]
-    assert "own split" not in bench.table(rows[:3], ["m"]).splitlines()[0]
+    assert "own split" not in psb_report.table(rows[:3], ["m"]).splitlines()[0]
     # the folds of another partition are reported apart, after those of partition 0
     rows += [dict(run("fold0", 1.0), partition=2), dict(run("fold1", 0.5), partition=2)]
-    cells = [c.strip() for c in bench.table(rows, ["m"]).splitlines()[2].strip("|").split("|")]
+    cells = [c.strip() for c in psb_report.table(rows, ["m"]).splitlines()[2].strip("|").split("|")]
     assert cells[2] == "0.500 ± 0.354 (n=2); partition 2: 0.750 ± 0.354 (n=2)"
     only = [dict(run("fold0", 1.0), partition=1)]
     assert (
-        bench.table(only, ["m"]).splitlines()[2].split("|")[3].strip() == "partition 1: 1.000 ± 0.000 (n=1)"
+        psb_report.table(only, ["m"]).splitlines()[2].split("|")[3].strip()
+        == "partition 1: 1.000 ± 0.000 (n=1)"
     )
 
 
-def test_table_time_is_a_dash_without_diffusionnet_runs(bench):
+def test_table_time_is_a_dash_without_diffusionnet_runs():
     run = dict(model="edgefieldnet", seed=0, split="topology", test_accuracy=0.5, train_accuracy=1.0)
     run.update(train_seconds=10.0, seconds_per_step=0.02, parameters=1000)
-    row = bench.table([run]).splitlines()[-1]
+    row = psb_report.table([run]).splitlines()[-1]
     assert "nan" not in row and row.split("|")[-3].strip() == "-"
-    with_base = bench.table([run, dict(run, model="diffusionnet", seconds_per_step=0.04)]).splitlines()
+    with_base = psb_report.table([run, dict(run, model="diffusionnet", seconds_per_step=0.04)]).splitlines()
     assert with_base[2].split("|")[-3].strip() == "0.50"
 
 
-def test_table_partitions_keeps_the_folds_of_the_partitions_asked_for(bench, tmp_path, capsys):
+def test_table_partitions_keeps_the_folds_of_the_partitions_asked_for(tmp_path, capsys):
     """``--table RUNS --partitions 0`` leaves out the fold runs of other partitions (and
     keeps every other split), so each partition's comparison can be printed alone."""
 
@@ -363,13 +360,13 @@ def test_table_partitions_keeps_the_folds_of_the_partitions_asked_for(bench, tmp
 
     runs = [run("fixed", 0.5), run("fold0", 0.75), run("fold0", 1.0, partition=1)]
     (tmp_path / "runs.json").write_text(json.dumps(runs))
-    assert bench.main(["--table", str(tmp_path / "runs.json"), "--partitions", "0"]) == runs[:2]
+    assert command.main(["--table", str(tmp_path / "runs.json"), "--partitions", "0"]) == runs[:2]
     assert "partition 1" not in capsys.readouterr().out
-    assert bench.main(["--table", str(tmp_path / "runs.json"), "--partitions", "1,0"]) == runs
+    assert command.main(["--table", str(tmp_path / "runs.json"), "--partitions", "1,0"]) == runs
     assert "0.750 ± 0.000 (n=1); partition 1: 1.000 ± 0.000 (n=1)" in capsys.readouterr().out
 
 
-def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
+def test_paired_table_pairs_the_folds_and_corrects_the_t_test():
     """Rows are paired with the reference by seed and fold; the p-value is that of the
     corrected resampled t test over the folds, here worked out by hand: differences 1..5
     points over 5 folds of K = 5 give t = 0.03 / sqrt((1/5 + 1/4) 2.5e-4) = 2.828 on 4
@@ -386,7 +383,7 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
     step = [run("d", s, k, 0.85) for s in (0, 1) for k in range(5)]  # the same difference everywhere
     lone = [run("e", s, 0, 0.5) for s in (0, 1)] + [run("e", 0, 0, 0.5, split="fixed")]  # one fold: left out
     twice = [run("f", s, k, 0.9 - (k + 1) / 100) for s in (0, 1) for k in range(5)]  # b's, on two seeds
-    rows = paired_rows(bench.paired_table(ref + better + level + step + lone + twice, "ref"))
+    rows = paired_rows(psb_report.paired_table(ref + better + level + step + lone + twice, "ref"))
     assert set(rows) == {"b", "c", "d", "f"}
     assert rows["b"] == ["5 (5)", "+3.00", "5 / 0 / 0", "0.047"]
     assert rows["c"] == ["5 (10)", "+0.00", "0 / 10 / 0", "1.000"]
@@ -394,355 +391,78 @@ def test_paired_table_pairs_the_folds_and_corrects_the_t_test(bench):
     assert rows["f"] == ["5 (10)", "+3.00", "10 / 0 / 0", "0.047"]
     # seeds that disagree on a fold: the fold's difference is their mean
     split = [run("g", 0, k, 0.9 - (k + 1) / 100) for k in range(5)] + [run("g", 1, k, 0.9) for k in range(5)]
-    halves = paired_rows(bench.paired_table(ref + split, "ref"))["g"]
+    halves = paired_rows(psb_report.paired_table(ref + split, "ref"))["g"]
     assert halves == ["5 (10)", "+1.50", "5 / 5 / 0", "0.047"]
     # another partition's folds are other samples (repeated cross-validation): b's
     # differences on two partitions are 10 folds, t = 3.402 on 9 degrees of freedom
     repeated = [dict(r, partition=1) for r in ref + better]
-    both = paired_rows(bench.paired_table(ref + better + repeated, "ref"))["b"]
+    both = paired_rows(psb_report.paired_table(ref + better + repeated, "ref"))["b"]
     assert both == ["10 (10)", "+3.00", "10 / 0 / 0", "0.008"]
     # K from the argument: more folds, smaller correction, smaller p
-    assert float(paired_rows(bench.paired_table(ref + better, "ref", folds=10))["b"][-1]) < 0.047
+    assert float(paired_rows(psb_report.paired_table(ref + better, "ref", folds=10))["b"][-1]) < 0.047
     with pytest.raises(ValueError, match="no cross-validation runs of 'x'"):
-        bench.paired_table(ref, "x")
+        psb_report.paired_table(ref, "x")
     with pytest.raises(ValueError, match="at least 2 folds"):
-        bench.paired_table(ref, "ref", folds=1)
+        psb_report.paired_table(ref, "ref", folds=1)
 
 
-def test_vertex_laplacian_options_and_rows(bench):
-    assert bench.operator_options() == bench.OPERATOR_OPTIONS  # the cache keys of cotan runs unchanged
-    assert bench.operator_options("robust")["vertex_laplacian"] == "robust"
+def test_vertex_laplacian_options_and_rows():
+    assert psb_data.operator_options() == psb_data.OPERATOR_OPTIONS  # the cache keys of cotan runs unchanged
+    assert psb_data.operator_options("robust")["vertex_laplacian"] == "robust"
     with pytest.raises(ValueError, match="vertex_laplacian"):
-        bench.operator_options("edge")
-    assert bench.label({"model": "m"}) == "m"
-    assert bench.label({"model": "m", "vertex_laplacian": "robust"}) == "m (robust Laplacian)"
+        psb_data.operator_options("edge")
+    assert psb_report.label({"model": "m"}) == "m"
+    assert psb_report.label({"model": "m", "vertex_laplacian": "robust"}) == "m (robust Laplacian)"
 
 
-class _MeanLinear(torch.nn.Module):
-    """A stand-in model: a linear map of each mesh's mean feature, with dropout."""
-
-    def __init__(self, c_in, c_out, log_features=False):
-        super().__init__()
-        self.linear, self.drop = torch.nn.Linear(c_in, c_out), torch.nn.Dropout(0.5)
-
-    def forward(self, batch):
-        return self.linear(self.drop(batch.features.mean(0, keepdim=True)))
-
-
-class _ToyBatch(SimpleNamespace):
-    def to(self, device):  # the features stay on the CPU
-        return self
-
-
-def _toy_batches(n=12, classes=3):
-    g = torch.Generator().manual_seed(5)
-    return [
-        _ToyBatch(features=torch.randn(7, 4, generator=g) + i % classes, labels=torch.tensor(i % classes))
-        for i in range(n)
-    ]
-
-
-def test_averaged_weights_are_the_mean_of_the_last_epochs(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches()
-    model, averaged, _ = bench.fit("toy", batches, seed=3, epochs=5, num_classes=3, average=3)
-    finals = [bench.fit("toy", batches, seed=3, epochs=e, num_classes=3, average=0)[0] for e in (3, 4, 5)]
-    assert bench.fit("toy", batches, 3, 5, 3, average=0)[1] is None
-    for name, p in model.named_parameters():  # averaging leaves the run's own weights as they were
-        torch.testing.assert_close(p, dict(finals[-1].named_parameters())[name], rtol=0, atol=0)
-    for name, p in averaged.module.named_parameters():
-        mean = torch.stack([dict(m.named_parameters())[name] for m in finals]).mean(0)
-        torch.testing.assert_close(p, mean)
-    assert not torch.equal(averaged.module.linear.weight, model.linear.weight)
-
-
-def test_run_records_and_table_rows_of_averaged_weights(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches()
-    r = bench.train("toy", batches[:9], batches[9:], seed=0, epochs=4, num_classes=3, average=10)
-    assert r["average_epochs"] == 4 and 0 <= r["averaged_test_accuracy"] <= 1
-    assert "average_epochs" not in bench.train("toy", batches[:9], batches[9:], 0, 2, 3, average=0)
-    r.update(split="fixed", test_accuracy=0.25, averaged_test_accuracy=0.75)
-    rows = bench.with_averaged([r])
-    assert [bench.label(x) for x in rows] == ["toy", "toy, averaged last 4"]
-    lines = bench.table(rows, [bench.label(x) for x in rows]).splitlines()
-    assert lines[2].startswith("| toy | 0.250 ± 0.000 (n=1)")
-    assert lines[3].startswith("| toy, averaged last 4 | 0.750 ± 0.000 (n=1)")
-
-
-class _Logits(torch.nn.Module):
-    """A stand-in model whose logits are each mesh's mean feature; it records its mode."""
-
-    def __init__(self):
-        super().__init__()
-        self.modes = []
-
-    def forward(self, batch):
-        self.modes.append(self.training)
-        return batch.features.mean(0, keepdim=True)
-
-
-def _logits(values, label):
-    return SimpleNamespace(features=torch.tensor([values]), labels=torch.tensor(label))
-
-
-def test_runs_record_the_class_given_to_each_test_mesh(bench, monkeypatch):
-    model = _Logits()
-    meshes = [_logits([0.0, 0.2], 0), _logits([0.0, 0.1], 1), _logits([1.0, 0.0], 0)]
-    assert bench.predictions(model, meshes) == [1, 1, 0]
-    assert bench.accuracy(model, meshes, [0, 1, 0]) == 1.0  # from the predictions given
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches()
-    r = bench.train("toy", batches[:9], batches[9:], 0, 4, 3, average=2)
-    assert len(r["test_predictions"]) == len(r["averaged_test_predictions"]) == 3
-    for key in ("test", "averaged_test"):
-        right = [p == int(b.labels) for p, b in zip(r[f"{key}_predictions"], batches[9:])]
-        assert r[f"{key}_accuracy"] == pytest.approx(sum(right) / 3)
-    plain, averaged = bench.with_averaged([r])
-    assert plain["test_predictions"] == r["test_predictions"]
-    assert averaged["test_predictions"] == r["averaged_test_predictions"]
-
-
-def test_test_time_augmentation_averages_the_probabilities_of_a_mesh_and_its_copies(bench):
-    model = _Logits()
-    # mesh 0 (class 0) is misread alone, and read right with its two copies; mesh 1 is read
-    # right alone and misread with its copies; mesh 2 has no copies
-    meshes = [_logits([0.0, 0.2], 0), _logits([0.0, 0.1], 1), _logits([1.0, 0.0], 0)]
-    copies = [
-        [_logits([3.0, 0.0], 0), _logits([2.0, 0.0], 0)],
-        [_logits([0.0, -2.0], 1), _logits([0.0, -2.0], 1)],
-        [],
-    ]
-    assert bench.accuracy(model, meshes) == pytest.approx(2 / 3)
-    assert bench.tta_accuracy(model, meshes, copies) == pytest.approx(2 / 3)
-    assert bench.tta_accuracy(model, meshes, [copies[0], [], []]) == 1.0
-    # probabilities are averaged, not logits: one confident copy does not outvote two others
-    # (the mean logits would read mesh 0 right: 2.25 against 1.55)
-    votes = [[_logits([9.0, 0.0], 0), _logits([0.0, 3.0], 0), _logits([0.0, 3.0], 0)], [], []]
-    assert bench.tta_accuracy(model, meshes, votes) == pytest.approx(2 / 3)
-    assert not any(model.modes) and model.training  # evaluated in eval mode, then back to training
-
-
-def test_run_records_of_test_time_augmentation(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches()
-    test_copies = [[batches[j] for j in (0, 1)] for _ in batches[9:]]
-    r = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=2, test_copies=test_copies)
-    assert 0 <= r["tta_test_accuracy"] <= 1 and 0 <= r["averaged_tta_test_accuracy"] <= 1
-    plain = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=2)
-    assert "tta_test_accuracy" not in plain
-    assert plain["test_accuracy"] == r["test_accuracy"]  # the run itself is the one it was
-    same = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, test_copies=[[]] * 3)
-    assert same["tta_test_accuracy"] == same["test_accuracy"] and "averaged_tta_test_accuracy" not in same
-
-
-def test_stretched_copies_are_reproducible_non_rigid_and_normalised(bench):
-    rng = np.random.default_rng(0)
-    v = rng.standard_normal((50, 3)) * [2.0, 1.0, 0.5] + 3.0
-    w = bench.stretched(v, index=7, copy=1)
-    np.testing.assert_array_equal(w, bench.stretched(v, index=7, copy=1))
-    assert not np.allclose(w, bench.stretched(v, index=7, copy=2))
-    np.testing.assert_allclose(np.linalg.norm(w, axis=1).max(), 1.0)
-    np.testing.assert_allclose((w.max(0) + w.min(0)) / 2, 0.0, atol=1e-12)
-    # not a similarity: ratios of distances change, within the stretch's bounds
-    d0 = np.linalg.norm(v[:, None] - v[None], axis=-1)[np.triu_indices(50, 1)]
-    d1 = np.linalg.norm(w[:, None] - w[None], axis=-1)[np.triu_indices(50, 1)]
-    ratio = d1 / d0
-    assert ratio.max() / ratio.min() > 1.05
-    assert ratio.max() / ratio.min() <= bench.STRETCH**2 + 1e-9
-
-
-def test_training_steps_draw_the_mesh_or_its_copies(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches(6)
-    copies = [
-        [SimpleNamespace(features=b.features + 0.5, labels=b.labels) for _ in range(2)] for b in batches
-    ]
-    seen = []
-    step = bench.train_step
-    monkeypatch.setattr(bench, "train_step", lambda m, o, b: (seen.append(b), step(m, o, b)))
-    bench.fit("toy", batches, seed=1, epochs=20, num_classes=3, average=0, copies=copies)
-    originals = sum(any(b is x for x in batches) for b in seen)
-    assert len(seen) == 120 and 25 <= originals <= 55  # a third of the steps, drawn uniformly
-    assert {id(b) for b in seen} <= {id(x) for x in batches} | {id(c) for cs in copies for c in cs}
-    # without copies (or empty ones) the run is the one it was
-    seen.clear()
-    plain = bench.fit("toy", batches, seed=1, epochs=3, num_classes=3, average=0)[0]
-    empty = bench.fit("toy", batches, seed=1, epochs=3, num_classes=3, average=0, copies=[[]] * 6)[0]
-    assert all(any(b is x for x in batches) for b in seen)
-    torch.testing.assert_close(plain.linear.weight, empty.linear.weight, rtol=0, atol=0)
-
-
-def test_copies_whose_operators_fail_are_left_out_and_reported(bench, monkeypatch, capsys):
-    v = np.random.default_rng(1).standard_normal((6, 3))
-    dataset = {"meshes": [(v, None), (v + 1, None), (v, None)], "labels": np.array([0, 1, 2])}
-
-    def fake_precompute(one, cache_dir, vertex_laplacian="cotan", k_edge=32, inputs="hks"):
-        (w, _), label = one["meshes"][0], int(one["labels"][0])
-        if label == 1 and np.allclose(w, bench.stretched(v + 1, 1, 0)):
-            raise ValueError("eigsh: Lanczos did not converge")
-        return [SimpleNamespace(labels=label)], []
-
-    monkeypatch.setattr(bench, "precompute", fake_precompute)
-    out = bench.precompute_copies(dataset, None, 2, np.array([True, True, False]))
-    assert [len(c) for c in out] == [2, 1, 0] and all(b.labels == 1 for b in out[1])
-    assert "left out 1 copies: mesh 1 copy 0: eigsh: Lanczos did not converge" in capsys.readouterr().out
-    assert bench.precompute_copies(dataset, None, 0, np.ones(3, bool)) == [[], [], []]
-
-
-def test_copies_take_the_stretch_asked_for_and_runs_name_it(bench, monkeypatch):
-    v = np.random.default_rng(2).standard_normal((40, 3))
-    dataset = {"meshes": [(v, None)], "labels": np.array([0])}
-    seen = []
-    monkeypatch.setattr(
-        bench, "precompute", lambda one, *a: (seen.append(one["meshes"][0][0]), ([None], []))[1]
+def test_edge_eigenpairs_reach_the_operators_and_the_run_label():
+    assert psb_data.operator_options()["k_edge"] == variants.K_EDGE == 32
+    assert psb_data.operator_options("robust", 48) == dict(
+        psb_data.OPERATOR_OPTIONS, k_edge=48, vertex_laplacian="robust"
     )
-    bench.precompute_copies(dataset, None, 1, np.array([True]))
-    bench.precompute_copies(dataset, None, 1, np.array([True]), spread=1.5)
-    np.testing.assert_array_equal(seen[0], bench.stretched(v, 0, 0))
-    np.testing.assert_array_equal(seen[1], bench.stretched(v, 0, 0, 1.5))
-    assert not np.allclose(seen[0], seen[1])
+    assert psb_data.operator_options() == psb_data.OPERATOR_OPTIONS  # the cache keys as before
     run = {"model": "edgefieldnet", "augment": 4}
-    assert bench.label(run) == "edgefieldnet, 4 stretched copies"
-    assert bench.label(dict(run, stretch=bench.STRETCH)) == "edgefieldnet, 4 stretched copies"
-    assert bench.label(dict(run, stretch=1.5)) == "edgefieldnet, 4 stretched copies (up to 1.5)"
+    assert psb_report.label(dict(run, k_edge=48)) == "edgefieldnet (48 edge eigenpairs), 4 stretched copies"
+    assert psb_report.label(dict(run, k_edge=32)) == "edgefieldnet, 4 stretched copies"
 
 
-def test_warped_copies_keep_their_stretch_and_runs_name_the_warp(bench, monkeypatch):
-    v = np.random.default_rng(3).standard_normal((60, 3))
-    dataset = {"meshes": [(v, None)], "labels": np.array([0])}
-    seen = []
-    monkeypatch.setattr(
-        bench, "precompute", lambda one, *a: (seen.append(one["meshes"][0][0]), ([None], []))[1]
-    )
-    bench.precompute_copies(dataset, None, 2, np.array([True]), warp=0.3)
-    stretched = [bench.stretched(v, 0, c) for c in range(2)]
-    for c in range(2):
-        np.testing.assert_array_equal(seen[c], bench.stretched(v, 0, c, warp=0.3))
-        # the warp moves the stretched copy (by at most its amplitude, before rescaling)
-        moved = np.linalg.norm(seen[c] - stretched[c], axis=1)
-        assert 1e-3 < moved.max() < 0.3
-    np.testing.assert_array_equal(bench.stretched(v, 0, 1, warp=0.0), stretched[1])
-    run = {"model": "edgefieldnet", "augment": 4}
-    assert bench.label(dict(run, warp=0.3)) == "edgefieldnet, 4 stretched copies, warped (strain 0.3)"
-    assert bench.label(dict(run, warp=0.0)) == "edgefieldnet, 4 stretched copies"
-    assert (
-        bench.label({"model": "edgefieldnet", "tta": 8, "warp": 0.3}) == "edgefieldnet, warped (strain 0.3)"
-    )
-
-
-def test_edge_eigenpairs_reach_the_operators_and_the_run_label(bench):
-    assert bench.operator_options()["k_edge"] == bench.K_EDGE == 32
-    assert bench.operator_options("robust", 48) == dict(
-        bench.OPERATOR_OPTIONS, k_edge=48, vertex_laplacian="robust"
-    )
-    assert bench.operator_options() == bench.OPERATOR_OPTIONS  # the cache keys as before
-    run = {"model": "edgefieldnet", "augment": 4}
-    assert bench.label(dict(run, k_edge=48)) == "edgefieldnet (48 edge eigenpairs), 4 stretched copies"
-    assert bench.label(dict(run, k_edge=32)) == "edgefieldnet, 4 stretched copies"
-
-
-def test_curvature_input_follows_the_hks_and_only_the_hks_are_logged(bench, tmp_path):
+def test_curvature_input_follows_the_hks_and_only_the_hks_are_logged(tmp_path):
     import torch_edgevf as ev
     from torch_edgevf.learning.precompute import heat_kernel_signature, mean_curvature_signature
 
     v, f = ev.icosphere(3)
     v = v * torch.tensor([1.0, 0.7, 0.5], dtype=v.dtype)  # an ellipsoid: the curvature varies
     dataset = {"meshes": [(v.numpy(), f.numpy())], "labels": np.array([2])}
-    (plain,), _ = bench.precompute(dataset, tmp_path)
-    (both,), _ = bench.precompute(dataset, tmp_path, inputs="hks+curvature")
-    assert plain.features.shape[1] == bench.HKS_SCALES == 16 and both.features.shape[1] == 16 + 9
+    (plain,), _ = psb_data.precompute(dataset, tmp_path)
+    (both,), _ = psb_data.precompute(dataset, tmp_path, inputs="hks+curvature")
+    assert plain.features.shape[1] == psb_data.HKS_SCALES == 16 and both.features.shape[1] == 16 + 9
     torch.testing.assert_close(both.features[:, :16], plain.features)
-    ops = bench.OperatorCache(tmp_path).get(v.numpy(), f.numpy(), **bench.OPERATOR_OPTIONS)
+    ops = OperatorCache(tmp_path).get(v.numpy(), f.numpy(), **psb_data.OPERATOR_OPTIONS)
     h = mean_curvature_signature(ops.verts, ops.faces, ops.vertex_evals, ops.vertex_evecs, ops.vertex_mass)
     torch.testing.assert_close(both.features[:, 16:], h.float())
     assert float(both.features[:, 16:].min()) < 0.5 < float(both.features[:, 16:].max())
     torch.testing.assert_close(
         plain.features, heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16).float()
     )
-    edge, _ = bench.new_model("edgefieldnet", both, 3, seed=0)
-    vertex, _ = bench.new_model("diffusionnet-nodropout", both, 3, seed=0)
-    recommended, _ = bench.new_model(bench.RECOMMENDED_MODEL, both, 3, seed=0)
+    edge, _ = psb_training.new_model("edgefieldnet", both, 3, seed=0)
+    vertex, _ = psb_training.new_model("diffusionnet-nodropout", both, 3, seed=0)
+    recommended, _ = psb_training.new_model(psb_report.RECOMMENDED_MODEL, both, 3, seed=0)
     assert edge.log_features == 16 and not hasattr(vertex, "log_features")  # the library's, raw input
     assert recommended.channels == 16  # the library's network on the logarithm of the HKS only
-    assert bench.new_model("edgefieldnet", plain, 3, seed=0)[0].log_features is True
-    assert bench.new_model(bench.RECOMMENDED_MODEL, plain, 3, seed=0)[0].channels is True
+    assert psb_training.new_model("edgefieldnet", plain, 3, seed=0)[0].log_features is True
+    assert psb_training.new_model(psb_report.RECOMMENDED_MODEL, plain, 3, seed=0)[0].channels is True
     assert all(torch.isfinite(m(both)).all() for m in (edge, vertex, recommended))
     run = {"model": "edgefieldnet", "augment": 4}
     assert (
-        bench.label(dict(run, input="hks+curvature"))
+        psb_report.label(dict(run, input="hks+curvature"))
         == "edgefieldnet, mean curvature input, 4 stretched copies"
     )
-    assert bench.label(dict(run, input="hks")) == "edgefieldnet, 4 stretched copies"
+    assert psb_report.label(dict(run, input="hks")) == "edgefieldnet, 4 stretched copies"
     with pytest.raises(ValueError, match="inputs must be one of"):
-        bench.precompute(dataset, tmp_path, inputs="xyz")
+        psb_data.precompute(dataset, tmp_path, inputs="xyz")
 
 
-def test_schedules_halve_or_decay_the_rate_along_a_cosine(bench):
-    def rates(schedule, epochs):
-        opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1e-3)
-        sched, out = bench.new_schedule(opt, schedule, epochs), []
-        for _ in range(epochs):
-            out.append(opt.param_groups[0]["lr"])
-            opt.step()
-            sched.step()
-        return np.array(out + [opt.param_groups[0]["lr"]])
-
-    step = rates("step", 120)
-    assert (step[:50] == 1e-3).all() and (step[50:100] == 5e-4).all() and (step[100:] == 2.5e-4).all()
-    cosine = rates("cosine", 60)
-    expected = 1e-3 * (1 + np.cos(np.pi * np.arange(61) / 60)) / 2
-    np.testing.assert_allclose(cosine, expected, rtol=1e-9, atol=1e-15)
-    assert cosine[-1] < 1e-12 and (np.diff(cosine) < 0).all()
-    with pytest.raises(ValueError, match="schedule must be one of"):
-        bench.new_schedule(torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=1), "linear", 3)
-
-
-def test_weight_decay_takes_adamw_and_shrinks_weights_without_gradients(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batch = _toy_batches()[0]
-    model, opt = bench.new_model("toy", batch, 3, seed=0)
-    assert type(opt) is torch.optim.Adam and opt.param_groups[0]["weight_decay"] == 0
-    model, opt = bench.new_model("toy", batch, 3, seed=0, weight_decay=0.5)
-    assert type(opt) is torch.optim.AdamW and opt.param_groups[0]["weight_decay"] == 0.5
-    before = model.linear.weight.detach().clone()
-    for p in model.parameters():
-        p.grad = torch.zeros_like(p)
-    opt.step()  # a zero gradient moves nothing but the decay: w (1 - lr wd)
-    torch.testing.assert_close(model.linear.weight, before * (1 - 1e-3 * 0.5))
-
-
-def test_runs_record_and_name_their_optimiser_options(bench, monkeypatch):
-    monkeypatch.setitem(bench.MODELS, "toy", _MeanLinear)
-    batches = _toy_batches()
-    plain = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0)
-    decayed = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, weight_decay=0.5)
-    cosine = bench.train("toy", batches[:9], batches[9:], 0, 3, 3, average=0, schedule="cosine")
-    assert plain["parameters"] == decayed["parameters"] == cosine["parameters"]
-    run = {"model": "edgefieldnet", "augment": 4}
-    assert bench.label(dict(run, weight_decay=0.05)) == "edgefieldnet, 4 stretched copies, weight decay 0.05"
-    assert bench.label(dict(run, schedule="cosine")) == "edgefieldnet, 4 stretched copies, cosine schedule"
-    assert bench.label(dict(run, schedule="step", weight_decay=0)) == "edgefieldnet, 4 stretched copies"
-    fake = {
-        "meshes": [None] * 12,
-        "labels": np.repeat(np.arange(3), 4),
-        "split": np.tile([0, 0, 0, 1], 3),
-        "classes": ["a", "b", "c"],
-    }
-    record = dict(plain, test_accuracy=0.5, train_seconds=1.0, seconds_per_step=0.1)
-    saved = []
-    monkeypatch.setattr(bench, "load_psb", lambda path: fake)
-    monkeypatch.setattr(bench, "precompute", lambda d, *a: (batches, []))
-    monkeypatch.setattr(bench, "train", lambda *a: saved.append(a) or dict(record))
-    argv = ["--data", __file__, "--models", "edgefieldnet", "--seeds", "0", "--threads", "1"]
-    out = bench.main(argv + ["--weight-decay", "0.05", "--schedule", "cosine"])
-    assert saved[0][-2:] == (0.05, "cosine")
-    assert out[0]["weight_decay"] == 0.05 and out[0]["schedule"] == "cosine"
-    assert {"weight_decay", "schedule"}.isdisjoint(bench.main(argv)[0])  # the defaults: not recorded
-    assert saved[1][-2:] == (0.0, "step")
-
-
-def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path):
+def test_precompute_refuses_signatures_that_vanish(monkeypatch, tmp_path):
     """Wrong eigenpairs (all eigenvalues large) make the signatures underflow to zero: the
     mesh is refused with a ValueError, which leaves a stretched copy out, instead of
     training on zeros."""
@@ -750,18 +470,18 @@ def test_precompute_refuses_signatures_that_vanish(bench, monkeypatch, tmp_path)
 
     v, f = ev.icosphere(2)
     dataset = {"meshes": [(v.numpy(), f.numpy())], "labels": np.array([0])}
-    assert len(bench.precompute(dataset, tmp_path)[0]) == 1
-    real = bench.heat_kernel_signature
-    monkeypatch.setattr(bench, "heat_kernel_signature", lambda *a, **k: real(*a, **k) * 0)
+    assert len(psb_data.precompute(dataset, tmp_path)[0]) == 1
+    real = psb_data.heat_kernel_signature
+    monkeypatch.setattr(psb_data, "heat_kernel_signature", lambda *a, **k: real(*a, **k) * 0)
     with pytest.raises(ValueError, match="heat kernel signatures not all positive"):
-        bench.precompute(dataset, tmp_path)
+        psb_data.precompute(dataset, tmp_path)
 
 
-def test_precompute_times_only_the_meshes_it_computes(bench, tmp_path):
+def test_precompute_times_only_the_meshes_it_computes(tmp_path):
     import torch_edgevf as ev
 
     v, f = ev.icosphere(2)
     dataset = {"meshes": [(v.numpy(), f.numpy())] * 2, "labels": np.array([0, 1])}
-    batches, computed = bench.precompute(dataset, tmp_path)
+    batches, computed = psb_data.precompute(dataset, tmp_path)
     assert len(batches) == 2 and len(computed) == 1 and computed[0] > 0  # the second is cached
-    assert bench.precompute(dataset, tmp_path)[1] == []
+    assert psb_data.precompute(dataset, tmp_path)[1] == []

@@ -12,9 +12,8 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-import trimesh
 
-from torch_edgevf.learning import batching, precompute
+from torch_edgevf.learning import batching
 from torch_edgevf.learning import models as library
 from torch_edgevf.learning.layers import pool_edges_to_vertices
 
@@ -25,19 +24,8 @@ from conftest import (
     psb_classes_task,
     train_classifier,
 )
+from study import one_batch, sample, variants_common
 from study import variants as models
-
-OPTIONS = dict(k_edge=16, k_vertex=16, vertex_gradient=True)
-
-
-def _sample(v, f, label=0, dtype=torch.float64):
-    ops = precompute.compute_operators(v, f, **OPTIONS)
-    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8)
-    return batching.MeshSample(ops.to(dtype), x.to(dtype), label)
-
-
-def _batch(v, f, label=0, dtype=torch.float64):
-    return batching.collate_meshes([_sample(v, f, label, dtype)])
 
 
 def _rotation(seed=0):
@@ -90,7 +78,7 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
     v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
     f2 = inverse[f][:, [1, 2, 0]]  # renumbered vertices, rotated corners
     with torch.no_grad():
-        a, b = net(_batch(v, f)), net(_batch(v2, f2))
+        a, b = net(one_batch(v, f)), net(one_batch(v2, f2))
     if head == "vertex":
         b = b[inverse]
     assert a.abs().max() > 1e-3  # not a trivial output
@@ -99,7 +87,7 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
 
 def test_edge_field_block_without_field_diffusion_gradcheck():
     v, f = perturbed_icosphere(1, 0.08, seed=4)
-    batch = _batch(v, f)
+    batch = one_batch(v, f)
     torch.manual_seed(0)
     block = models.StudyEdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, field_diffusion=False).double()
     x = torch.randn(batch.num_vertices, 3, dtype=torch.float64, requires_grad=True)
@@ -115,7 +103,7 @@ def test_edge_field_block_without_field_diffusion_gradcheck():
 @pytest.mark.parametrize("high_pass", [False, True])
 def test_edge_field_block_gradcheck(mesh, high_pass):
     v, f = perturbed_icosphere(1, 0.08, seed=4)
-    batch = _batch(v, f)
+    batch = one_batch(v, f)
     torch.manual_seed(0)
     block = models.StudyEdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, high_pass=high_pass).double()
     if high_pass:  # the weight of the high-pass term, nonzero (it starts at zero)
@@ -176,7 +164,7 @@ def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh,
     as every field on the edges, on a batch of two meshes, with and without a mesh whose
     vector stream is dropped, and without the divergence and curl features, for the
     scalars, the fields and the gradients."""
-    pair = batching.collate_meshes([_sample(*mesh), _sample(*perturbed_icosphere(1, 0.05, seed=7))])
+    pair = batching.collate_meshes([sample(*mesh), sample(*perturbed_icosphere(1, 0.05, seed=7))])
     torch.manual_seed(0)
     block = models.StudyEdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, divergence=divergence).double()
     assert block.mlp[0].in_features == 2 * 8 + (3 if divergence else 1) * 4
@@ -202,7 +190,7 @@ def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh,
 def test_the_network_on_coefficients_is_the_network_on_the_edges(mesh):
     """EdgeFieldNet carries the fields of its blocks as coefficients; with the high-pass
     term (zero weight) it carries them on the edges: the same outputs."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     torch.manual_seed(0)
     a = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=3, mlp=(8,), readout_fields=True)
     torch.manual_seed(0)
@@ -228,7 +216,7 @@ def test_forward_spectral_needs_edge_fields_without_high_pass(kwargs):
 
 def test_high_pass_starts_as_the_network_without_it(mesh):
     """Zero-initialised and drawing no random numbers: the same seed gives the same network."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     torch.manual_seed(0)
     a = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, mlp=(8,)).double().eval()
     torch.manual_seed(0)
@@ -245,7 +233,7 @@ def test_high_pass_starts_as_the_network_without_it(mesh):
 @pytest.mark.parametrize("pool", ["mean_std", "mean"])
 def test_dropout_options_act_in_training_only(mesh, cls, pool):
     """Dropout on the readout (and the vector stream): same weights, same eval output; random in training."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     small = dict(width=8, num_blocks=2, mlp=(8,), dropout=0.0, pool=pool)
     if cls is models.StudyEdgeFieldNet:
         small["vector_width"] = 4
@@ -272,7 +260,7 @@ def test_a_mesh_without_its_vector_stream_is_alone_in_a_batch(mesh, vector):
     """keep=[True, False] on a batch of two: each mesh's output is its own, the first with
     its fields, the second as the block's path that skips the fields entirely."""
     v, f = mesh
-    first, second = _sample(v, f), _sample(*perturbed_icosphere(1, 0.05, seed=7))
+    first, second = sample(v, f), sample(*perturbed_icosphere(1, 0.05, seed=7))
     pair = batching.collate_meshes([first, second])
     torch.manual_seed(0)
     block = models.StudyEdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, vector=vector).double()
@@ -299,7 +287,7 @@ def test_a_mesh_without_its_vector_stream_is_alone_in_a_batch(mesh, vector):
 def test_stream_dropout_trains_on_both_networks_and_evaluates_the_full_one(mesh):
     """Same seed, same weights and the same output in evaluation as without it; in training
     each forward is either the full network or the one without its vector stream."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     small = dict(width=8, vector_width=4, num_blocks=2, mlp=(8,), dropout=0.0)
     torch.manual_seed(0)
     plain = models.StudyEdgeFieldNet(8, 5, **small).double()
@@ -321,7 +309,7 @@ def test_stream_dropout_trains_on_both_networks_and_evaluates_the_full_one(mesh)
 def test_the_field_readout_reads_the_fields(mesh):
     """With readout_fields the rest is initialised as without it, and the output moves with
     the fields' readout weights."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     small = dict(width=8, vector_width=4, num_blocks=2, mlp=(8,), dropout=0.0)
     torch.manual_seed(0)
     plain = models.StudyEdgeFieldNet(8, 5, **small).double().eval()
@@ -348,7 +336,7 @@ def test_field_readout_options_are_checked():
 def _local_block_on_the_edges(block, x, z, batch):
     """The block with ``field_diffusion=False`` as its formula reads: the gradients of the
     lifted scalars plus the carried fields, neither diffused nor projected."""
-    xd = models._diffuse_vertices(block.diffusion, x, batch)
+    xd = variants_common._diffuse_vertices(block.diffusion, x, batch)
     a = torch.view_as_complex(block.lift(xd).unflatten(1, (block.vector_width, 2)).contiguous())
     u = torch.linalg.solve(torch.diag(batch.edge_mass).to(a.dtype), batch.gradient.to_dense().to(a.dtype) @ a)
     u = u + block.mix(z)
@@ -363,7 +351,7 @@ def test_fields_not_diffused_are_the_gradients_on_the_edges(mesh):
     """``field_diffusion=False``: the block's fields are ``M_z^{-1} G a`` plus the carried
     fields, and its divergence and curl those of these fields, by dense algebra; the
     network needs no eigenpair of ``L_c``."""
-    batch = _batch(*mesh)
+    batch = one_batch(*mesh)
     torch.manual_seed(0)
     block = models.StudyEdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, field_diffusion=False).double()
     assert block.field_diffusion is None and not block.spectral
@@ -406,7 +394,7 @@ def test_divergence_option_is_checked_and_reaches_every_block(mesh):
     net = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, mlp=(8,), divergence=False).double().eval()
     assert all(b.mlp[0].in_features == 2 * 8 + 4 for b in net.blocks)
     with torch.no_grad():
-        assert torch.isfinite(net(_batch(*mesh))).all()
+        assert torch.isfinite(net(one_batch(*mesh))).all()
 
 
 def test_stream_dropout_needs_a_vector_stream():
@@ -431,7 +419,7 @@ def test_bad_dropout_is_named(kwargs):
 def test_network_gradcheck_in_the_features(log_features):
     """Float64 gradcheck through the whole network: log input, blocks, mean-and-deviation readout."""
     v, f = perturbed_icosphere(1, 0.08, seed=5)
-    batch = _batch(v, f)
+    batch = one_batch(v, f)
     torch.manual_seed(0)
     net = models.StudyEdgeFieldNet(8, 3, width=4, vector_width=2, num_blocks=2, mlp=(4,), dropout=0.0)
     net.log_features = log_features
@@ -452,23 +440,23 @@ def test_network_gradcheck_in_the_features(log_features):
 def test_mean_std_readout_separates_what_the_mean_does_not(mesh):
     """Two meshes whose last features have the same mean but different spreads get
     different logits from the mean-and-deviation readout and equal ones from the mean."""
-    b = _batch(*mesh)
+    b = one_batch(*mesh)
     x = torch.randn(b.num_vertices, 4, dtype=torch.float64)
     w = b.vertex_mass
     x = x - (w[:, None] * x).sum(0) / w.sum()  # mass-weighted mean 0
     last = torch.nn.Linear(8, 2).double()
-    a = models._readout(x, last, b, "global", "mean_std")
-    c = models._readout(3 * x, last, b, "global", "mean_std")
+    a = variants_common._readout(x, last, b, "global", "mean_std")
+    c = variants_common._readout(3 * x, last, b, "global", "mean_std")
     assert not torch.allclose(a, c)
     mean_last = torch.nn.Linear(4, 2).double()
     torch.testing.assert_close(
-        models._readout(x, mean_last, b, "global", "mean"),
-        models._readout(3 * x, mean_last, b, "global", "mean"),
+        variants_common._readout(x, mean_last, b, "global", "mean"),
+        variants_common._readout(3 * x, mean_last, b, "global", "mean"),
     )
 
 
 def test_log_features_need_positive_features(mesh):
-    b = _batch(*mesh)
+    b = one_batch(*mesh)
     b.features = b.features.clone()
     b.features[7, 2] = -0.5
     net = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1, log_features=True).double()
@@ -483,13 +471,13 @@ def test_log_features_need_positive_features(mesh):
 def test_log_features_of_the_first_channels_only(mesh, cls):
     """``log_features=k`` takes the logarithm of the first ``k`` channels and passes the
     rest (signed features) as they are; a non-positive value among the first ``k`` is named."""
-    b = _batch(*mesh)
+    b = one_batch(*mesh)
     signed = torch.randn(b.num_vertices, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
     b.features = torch.cat([b.features, signed], dim=1)
     torch.manual_seed(0)
     net = cls(11, 5, width=8, num_blocks=1, log_features=8).double()
     expected = torch.cat([torch.log(b.features[:, :8]), signed], dim=1)
-    torch.testing.assert_close(models._inputs(net.log_features, b), expected)
+    torch.testing.assert_close(variants_common._inputs(net.log_features, b), expected)
     assert torch.isfinite(net(b)).all()
     b.features[3, 5] = 0.0
     with pytest.raises(ValueError, match="log_features=8 needs positive features.*vertex 3, channel 5"):
@@ -514,11 +502,11 @@ def test_bad_readout_options_are_named(kwargs, match):
 def test_dtype_mismatch_is_named_at_the_first_call(mesh):
     net = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1)
     with pytest.raises(ValueError, match="float64.*float32|float32.*float64"):
-        net(_batch(*mesh, dtype=torch.float64))
+        net(one_batch(*mesh, dtype=torch.float64))
 
 
 def test_missing_operators_are_named(mesh):
-    b = _batch(*mesh)
+    b = one_batch(*mesh)
     b.vertex_gradient = None
     with pytest.raises(ValueError, match="vertex_gradient"):
         models.StudyDiffusionNet(8, 5, width=8, num_blocks=1).double()(b)
@@ -537,7 +525,7 @@ LEARNERS = {
 
 @pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
 def test_edge_field_net_learns_generated_shapes(options):
-    train, test = generated_shapes_task(_batch)
+    train, test = generated_shapes_task(one_batch)
     torch.manual_seed(0)
     net = models.StudyEdgeFieldNet(8, 4, width=16, vector_width=8, num_blocks=2, mlp=(16,), **options)
     train_classifier(net, train, epochs=15)
@@ -548,7 +536,7 @@ def test_edge_field_net_learns_generated_shapes(options):
 @pytest.mark.slow
 @pytest.mark.parametrize("options", LEARNERS.values(), ids=LEARNERS.keys())
 def test_edge_field_net_learns_psb_classes(options):
-    train, test = psb_classes_task(_batch)
+    train, test = psb_classes_task(one_batch)
     torch.manual_seed(0)
     net = models.StudyEdgeFieldNet(8, 4, width=32, vector_width=16, num_blocks=2, mlp=(32,), **options)
     train_classifier(net, train, epochs=10)
@@ -556,54 +544,6 @@ def test_edge_field_net_learns_psb_classes(options):
 
 
 # --------------------------------------------------------------------------- spectrum readout
-
-
-@pytest.mark.parametrize("radius", [1.0, 3.7])
-def test_spectrum_features_of_the_sphere_are_the_analytic_ones(radius):
-    """On the round sphere of any radius the eigenvalues of ``L_c`` (n = 1) are
-    ``(l (l + 1) - 1) / r^2``, ``l >= 1``, of complex multiplicity ``2 l + 1``: the
-    features are ``log(0.01 + 2 (l (l + 1) - 1) / (i + 1))`` (the area is ``4 pi r^2``).
-    Those of the Laplacian are ``l (l + 1) / r^2`` of multiplicity ``2 l + 1``, ``l >= 0``:
-    past the constant mode the features are ``log(0.01 + l (l + 1) / i)``."""
-    m = trimesh.creation.icosphere(subdivisions=3, radius=radius)
-    ops = precompute.compute_operators(np.asarray(m.vertices), np.asarray(m.faces), k_edge=15, k_vertex=16)
-    ones = torch.ones(len(m.vertices), 1, dtype=torch.float64)
-    batch = batching.collate_meshes([batching.MeshSample(ops, ones, 0)])
-    got = models.spectrum_features(batch, 15)
-    mu = np.repeat([1.0, 5.0, 11.0], [3, 5, 7])
-    assert got.shape == (1, 15) and got.dtype == torch.float64
-    np.testing.assert_allclose(got[0].numpy(), np.log(0.01 + 2 * mu / np.arange(1, 16)), atol=0.01)
-    got = models.spectrum_features(batch, 15, "laplacian")
-    ll = np.repeat([2.0, 6.0, 12.0], [3, 5, 7])
-    # the cotangent eigenvalues of this sphere are within 2% of the analytic ones
-    np.testing.assert_allclose(got[0].numpy(), np.log(0.01 + ll / np.arange(1, 16)), atol=0.025)
-    with pytest.raises(ValueError, match=r"at least 17 eigenpairs of the vertex Laplacian.*k_vertex=17"):
-        models.spectrum_features(batch, 16, "laplacian")
-    with pytest.raises(ValueError, match="operator must be one of"):
-        models.spectrum_features(batch, 4, "hodge")
-
-
-def test_spectrum_features_are_per_mesh_and_differentiable(mesh):
-    """In a batch of two meshes each row is that mesh's own (the same as alone), and
-    the features have float64 gradients in the eigenvalues and the masses."""
-    v, f = mesh
-    v2, f2 = perturbed_icosphere(1, 0.1, seed=9)
-    alone = [models.spectrum_features(_batch(*m), 12) for m in ((v, f), (v2, f2))]
-    both = batching.collate_meshes([_sample(v, f), _sample(v2, f2)])
-    torch.testing.assert_close(models.spectrum_features(both, 12), torch.cat(alone))
-    evals = both.edge_evals.detach().clone().requires_grad_(True)
-    mass = both.vertex_mass.detach().clone().requires_grad_(True)
-
-    def features(e, m):
-        both.edge_evals, both.vertex_mass = e, m
-        return models.spectrum_features(both, 12)
-
-    assert torch.autograd.gradcheck(features, (evals, mass))
-
-
-def test_spectrum_features_need_the_eigenpairs(mesh):
-    with pytest.raises(ValueError, match="spectrum=17 needs at least 17 eigenpairs of L_c, the batch has 16"):
-        models.spectrum_features(_batch(*mesh), 17)
 
 
 SPECTRUM_NETWORKS = {
@@ -641,10 +581,10 @@ def test_spectrum_readout_is_invariant_and_reads_the_spectrum(mesh, name):
     inverse = np.argsort(perm)
     v2, f2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm], inverse[f][:, [1, 2, 0]]
     with torch.no_grad():
-        a, b = net(_batch(v, f)), net(_batch(v2, f2))
+        a, b = net(one_batch(v, f)), net(one_batch(v2, f2))
         torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)
         net.spectrum.weight.mul_(-3.0)
-        assert (net(_batch(v, f)) - a).abs().max() > 1e-3
+        assert (net(one_batch(v, f)) - a).abs().max() > 1e-3
 
 
 @pytest.mark.parametrize(
@@ -666,7 +606,7 @@ def test_bad_spectrum_is_named(kwargs, match):
 def test_spectrum_larger_than_the_eigenpairs_is_named_at_the_first_call(mesh):
     net = models.StudyEdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=1, spectrum=32).double()
     with pytest.raises(ValueError, match="k_edge=32"):
-        net(_batch(*mesh))
+        net(one_batch(*mesh))
 
 
 # --------------------------------------------------------------------------- the library's networks
@@ -678,7 +618,7 @@ def test_the_library_networks_are_the_study_networks_of_their_names(mesh, name):
     ablations of the vector stream, the DiffusionNets) is the study's network of that name:
     the same weights for a seed and the same outputs, in evaluation and in training (the
     same dropout masks), so that the saved runs are runs of the library's networks."""
-    pair = batching.collate_meshes([_sample(*mesh), _sample(*perturbed_icosphere(1, 0.05, seed=7), 1)])
+    pair = batching.collate_meshes([sample(*mesh), sample(*perturbed_icosphere(1, 0.05, seed=7), 1)])
     torch.manual_seed(0)
     study = models.STUDY_MODELS[name](8, 5, True).double()
     torch.manual_seed(0)
