@@ -131,6 +131,12 @@ def perturbed_icosphere(level: int = 1, scale: float = 0.05, seed: int = 0, renu
     return v, f
 
 
+def random_rotation(seed: int = 0) -> np.ndarray:
+    """A random proper rotation of R^3 (determinant +1), the same for a seed."""
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
 def perturbed_grid(n: int = 4, scale: float = 0.05, seed: int = 0, flat: bool = False):
     """A noisy grid with boundary and randomly renumbered vertices."""
     v, f = ev.meshes.grid(n, n)

@@ -22,15 +22,11 @@ from conftest import (
     generated_shapes_task,
     perturbed_icosphere,
     psb_classes_task,
+    random_rotation,
     train_classifier,
 )
 from study import one_batch, sample, variants_common
 from study import variants as models
-
-
-def _rotation(seed=0):
-    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
-    return q * np.sign(np.linalg.det(q))
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +71,7 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
                 block.high_pass.normal_()
     perm = np.random.default_rng(1).permutation(v.shape[0])
     inverse = np.argsort(perm)
-    v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
+    v2 = (v @ random_rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
     f2 = inverse[f][:, [1, 2, 0]]  # renumbered vertices, rotated corners
     with torch.no_grad():
         a, b = net(one_batch(v, f)), net(one_batch(v2, f2))
@@ -579,7 +575,7 @@ def test_spectrum_readout_is_invariant_and_reads_the_spectrum(mesh, name):
     assert all(torch.equal(w, plain.state_dict()[k]) for k, w in shared.items())
     perm = np.random.default_rng(1).permutation(v.shape[0])
     inverse = np.argsort(perm)
-    v2, f2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm], inverse[f][:, [1, 2, 0]]
+    v2, f2 = (v @ random_rotation().T + np.array([0.3, -1.0, 2.0]))[perm], inverse[f][:, [1, 2, 0]]
     with torch.no_grad():
         a, b = net(one_batch(v, f)), net(one_batch(v2, f2))
         torch.testing.assert_close(b, a, rtol=1e-6, atol=1e-8)

@@ -18,6 +18,7 @@ from conftest import (
     generated_shapes_task,
     perturbed_icosphere,
     psb_classes_task,
+    random_rotation,
     train_classifier,
 )
 
@@ -32,11 +33,6 @@ def _sample(v, f, label=0, dtype=torch.float64, log=True):
 
 def _batch(v, f, label=0, dtype=torch.float64):
     return batching.collate_meshes([_sample(v, f, label, dtype)])
-
-
-def _rotation(seed=0):
-    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
-    return q * np.sign(np.linalg.det(q))
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +75,7 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
     net = NETWORKS[name](head).double().eval()
     perm = np.random.default_rng(1).permutation(v.shape[0])
     inverse = np.argsort(perm)
-    v2 = (v @ _rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
+    v2 = (v @ random_rotation().T + np.array([0.3, -1.0, 2.0]))[perm]
     f2 = inverse[f][:, [1, 2, 0]]  # renumbered vertices, rotated corners
     with torch.no_grad():
         a, b = net(_batch(v, f)), net(_batch(v2, f2))
