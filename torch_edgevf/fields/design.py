@@ -63,7 +63,7 @@ import numpy as np
 import torch
 
 from .._dtypes import complex_dtype
-from .._validation import as_edge_field, as_verts, check_n, check_vertex_count, single_mesh
+from .._validation import as_edge_field, check_n, single_mesh
 from ..linalg import SparseSolver, eigsh, expm_multiply, solve
 from ..mesh.geometry import (
     FaceGeometry,
@@ -71,8 +71,8 @@ from ..mesh.geometry import (
     edge_lengths,
     edge_lengths_of,
     face_geometry_of,
+    topology_and_verts,
 )
-from ..mesh.topology import Topology
 from ..operators import functional as ops
 from ..operators import kernels
 from ..operators.patterns import Pattern, diagonal, sparse_coo
@@ -152,9 +152,7 @@ class FieldDesigner:
             )
             self.mean_edge_length = per_edge.mean()
         else:
-            verts = as_verts(verts)
-            topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
-            check_vertex_count(verts, topo.num_vertices)
+            verts, topo = topology_and_verts(verts, faces, "FieldDesigner")
             geom = face_geometry_of(verts, topo)
             self.mean_edge_length = edge_lengths_of(verts, topo).mean()
         self.topology = topo

@@ -386,8 +386,10 @@ def _same_values(a: torch.Tensor, b: torch.Tensor) -> bool:
     return a.dtype == b.dtype and a.device == b.device and a.shape == b.shape and torch.equal(a, b.detach())
 
 
-def topology_and_verts(verts, topo) -> tuple[torch.Tensor, Topology]:
-    verts, topo = single_mesh(verts, topo, "this function")
+def topology_and_verts(verts, topo, caller: str = "this function") -> tuple[torch.Tensor, Topology]:
+    """Checked positions ``(V, 3)`` and the :class:`Topology` of ``topo`` (faces or a
+    topology) for their vertex count; ``caller`` names the function in the error of a batch."""
+    verts, topo = single_mesh(verts, topo, caller)
     if not isinstance(topo, Topology):
         topo = Topology(topo, num_vertices=None if not hasattr(verts, "shape") else verts.shape[0])
     verts = as_verts(verts)
