@@ -66,7 +66,7 @@ def with_averaged(results: list[dict]) -> list[dict]:
     return out
 
 
-def _base(names) -> str:
+def baseline_of(names) -> str:
     """The model times are compared with: the faithful baseline where it ran, else ``diffusionnet``."""
     return BASELINE if BASELINE in names else "diffusionnet"
 

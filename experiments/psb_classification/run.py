@@ -85,7 +85,7 @@ from psb_data import (  # noqa: E402
     splits,
     subset,
 )
-from psb_report import DEFAULT_MODELS, _base, in_partitions, paired_table, table, with_averaged  # noqa: E402
+from psb_report import DEFAULT_MODELS, baseline_of, in_partitions, paired_table, table, with_averaged  # noqa: E402
 from psb_training import (  # noqa: E402
     AVERAGE_EPOCHS,
     SCHEDULES,
@@ -357,7 +357,7 @@ def main(argv=None) -> list[dict]:
     batches = [b.to(device) for b in batches]  # the operators are computed on the CPU
     if a.step_time:
         times = step_times(names, batches, len(dataset["classes"]), rounds=a.rounds)
-        against = _base(times)
+        against = baseline_of(times)
         base = statistics.mean(times.get(against, [float("nan")]))
         for name, ts in times.items():
             ms = ", ".join(f"{1e3 * t:.1f}" for t in ts)

@@ -214,8 +214,9 @@ def test_the_faithful_baseline_has_no_dropout_and_the_other_diffusionnet_has():
     assert dropouts("diffusionnet") == [0.5] * 8  # 4 blocks, 2 hidden layers each
     assert dropouts("edgefieldnet-nodropout") == dropouts("edgefieldnet-vec8-nodropout") == []
     assert dropouts("edgefieldnet") == [0.5] * 6  # 3 blocks, 2 hidden layers each
-    assert psb_report._base({"edgefieldnet", "diffusionnet", psb_report.BASELINE}) == psb_report.BASELINE
-    assert psb_report._base({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
+    baseline = psb_report.BASELINE
+    assert psb_report.baseline_of({"edgefieldnet", "diffusionnet", baseline}) == baseline
+    assert psb_report.baseline_of({"edgefieldnet", "diffusionnet"}) == "diffusionnet"
 
 
 def test_the_spectrum_candidate_and_its_control_differ_from_their_bases_by_the_spectrum_only():
