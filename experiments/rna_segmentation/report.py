@@ -23,6 +23,7 @@ NAMES = {
     "edgefieldnet-scalar": "EdgeFieldNet without the vector stream",
     "edgefieldnet-vertexvec": "EdgeFieldNet with vertex gradients in place of G",
     "edgefieldnet-divcurl": "EdgeFieldNet with the fields' divergence and curl in the MLPs",
+    "edgefieldnet-local": "EdgeFieldNet with local fields (no L_c eigenbasis)",
 }
 
 

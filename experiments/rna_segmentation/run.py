@@ -38,13 +38,15 @@ HERE = Path(__file__).resolve().parent
 
 #: the networks, by name: the recommended edge-field network, the faithful DiffusionNet, and
 #: the edge network's ablations (no vector stream; vertex gradients in place of G; the divergence
-#: and curl of the fields added to the MLPs, the PSB study's variant)
+#: and curl of the fields added to the MLPs; the fields local, not diffused in the truncated
+#: L_c eigenbasis: the last two are the PSB study's variants)
 MODELS = (
     "edgefieldnet",
     "diffusionnet",
     "edgefieldnet-scalar",
     "edgefieldnet-vertexvec",
     "edgefieldnet-divcurl",
+    "edgefieldnet-local",
 )
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 
@@ -60,11 +62,18 @@ def build_model(name: str, in_channels: int, width: int) -> torch.nn.Module:
     common = dict(width=width, num_blocks=4, mlp=(width, width), head="vertex")
     if name == "diffusionnet":
         return DiffusionNet(in_channels, RNA_CLASSES, **common)
-    if name == "edgefieldnet-divcurl":  # the divergence and curl of the fields in the MLPs as well
+    if name in ("edgefieldnet-divcurl", "edgefieldnet-local"):
         sys.path.insert(0, str(HERE.parent / "psb_classification"))
         from variants import StudyEdgeFieldNet
 
-        return StudyEdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, divergence=True, **common)
+        # divcurl: the divergence and curl of the fields in the MLPs as well; local: the fields
+        # M_z^-1 G (xd W) on the edges as they are (every edge, no L_c diffusion, no eigenbasis)
+        options = (
+            dict(divergence=True)
+            if name == "edgefieldnet-divcurl"
+            else dict(divergence=False, field_diffusion=False)
+        )
+        return StudyEdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, **options, **common)
     vector = {"edgefieldnet": "edge", "edgefieldnet-scalar": "none", "edgefieldnet-vertexvec": "vertex"}[name]
     return EdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, vector=vector, **common)
 

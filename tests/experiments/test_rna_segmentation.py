@@ -122,3 +122,27 @@ def test_readme_tables_are_those_of_the_saved_runs():
     assert out.returncode == 0, out.stderr
     readme = RUN.with_name("README.md").read_text()
     assert "<!-- table:official -->" in readme and "<!-- table:validation -->" in readme
+
+
+def test_every_model_gives_every_vertex_a_score_of_every_class():
+    """Each network of the study, by name, on a mesh: (V, 260) logits, a gradient for every
+    parameter it uses."""
+    import torch
+
+    import torch_edgevf as ev
+    from torch_edgevf.learning import MeshSample, collate_meshes, compute_operators, heat_kernel_signature
+
+    sys.path.insert(0, str(RUN.parent))
+    import run as rna_run
+
+    v, f = ev.icosphere(2)
+    ops = compute_operators(v, f, k_edge=16, k_vertex=16, vertex_gradient=True, dtype=torch.float32)
+    x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16, log=True)
+    batch = collate_meshes([MeshSample(ops, x, torch.zeros(len(v), dtype=torch.int64))])
+    for name in rna_run.MODELS:
+        torch.manual_seed(0)
+        model = rna_run.build_model(name, 16, 8)
+        logits = model(batch)
+        assert logits.shape == (len(v), 260) and torch.isfinite(logits).all(), name
+        torch.nn.functional.cross_entropy(logits, batch.labels).backward()
+        assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters()), name
