@@ -146,3 +146,53 @@ def test_every_model_gives_every_vertex_a_score_of_every_class():
         assert logits.shape == (len(v), 260) and torch.isfinite(logits).all(), name
         torch.nn.functional.cross_entropy(logits, batch.labels).backward()
         assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters()), name
+
+
+def test_basis_share_is_one_in_the_span_and_small_for_gradients():
+    """``basis_share.kept_share`` keeps all of a field in the span of the basis; the command
+    prints a row per mesh and kind of scalars, with a share in [0, 1], and names a mesh it
+    cannot read."""
+    import torch
+
+    import torch_edgevf as ev
+    from torch_edgevf.learning import compute_operators
+
+    sys.path.insert(0, str(RUN.parent))
+    import basis_share
+
+    v, f = ev.icosphere(2)
+    ops = compute_operators(v, f, k_edge=16, k_vertex=16, vertex_gradient=True)
+    mass = ops.edge_mass.double()
+    # a gradient field that lies in the span: the basis keeps all of it
+    s = torch.randn(len(v), 2, dtype=torch.float64)
+    assert bool((basis_share.kept_share(ops.gradient, mass, ops.edge_evecs, s) <= 1 + 1e-12).all())
+    smooth = ops.vertex_evecs[:, 1:4]  # the sphere's l = 1 functions: their gradients are smooth
+    kept = basis_share.kept_share(ops.gradient, mass, ops.edge_evecs, smooth)
+    assert bool((kept > 0.99).all()), kept
+    sample = shared_path("datasets", "rna_sample")
+    script = RUN.with_name("basis_share.py")
+    out = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--data",
+            str(sample),
+            "--meshes",
+            "3CXC_9",
+            "--target-vertices",
+            "1500",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert out.returncode == 0, out.stderr
+    rows = [line.split("|")[1:-1] for line in out.stdout.splitlines() if line.startswith("| 3CXC_9")]
+    assert [r[2].strip() for r in rows] == ["log-HKS", "label indicators"]
+    assert all(0 <= float(r[3]) <= 1 for r in rows)
+    bad = subprocess.run(
+        [sys.executable, str(script), "--data", str(sample), "--meshes", "NOPE"],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 2 and "NOPE" in bad.stderr
