@@ -160,6 +160,7 @@ def test_basis_share_is_one_in_the_span_and_small_for_gradients():
     sys.path.insert(0, str(RUN.parent))
     import basis_share
 
+    pytest.importorskip("fast_simplification")  # the command decimates
     v, f = ev.icosphere(2)
     ops = compute_operators(v, f, k_edge=16, k_vertex=16, vertex_gradient=True)
     mass = ops.edge_mass.double()
@@ -196,3 +197,33 @@ def test_basis_share_is_one_in_the_span_and_small_for_gradients():
         text=True,
     )
     assert bad.returncode == 2 and "NOPE" in bad.stderr
+
+
+@pytest.mark.slow
+def test_readme_basis_share_table_is_what_the_command_prints():
+    pytest.importorskip("fast_simplification")
+    sample = shared_path("datasets", "rna_sample")
+    out = subprocess.run(
+        [
+            sys.executable,
+            str(RUN.with_name("basis_share.py")),
+            "--data",
+            str(sample),
+            "--meshes",
+            "3CXC_9",
+            "4P6F_RB",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert out.returncode == 0, out.stderr
+    readme = RUN.with_name("README.md").read_text()
+    rows = [
+        line
+        for line in out.stdout.splitlines()
+        if line.startswith("| 3CXC_9") or line.startswith("| 4P6F_RB")
+    ]
+    assert len(rows) == 4
+    for row in rows:
+        assert "  " + row in readme, row
