@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -36,10 +35,7 @@ def main(argv=None) -> int:
     p.add_argument("--width", type=int, default=128)
     p.add_argument("--inputs", choices=rna_run.INPUTS, default="loghks")
     p.add_argument("--limit", type=int, default=None, help="first N test meshes only")
-    p.add_argument(
-        "--cache",
-        default=os.environ.get("TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "rna")),
-    )
+    p.add_argument("--cache", default=rna_run.DEFAULT_CACHE, help="operator cache folder (as run.py's)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--json", default=None, help="write the rows here")
     a = p.parse_args(argv)

@@ -35,6 +35,8 @@ from torch_edgevf.learning.datasets.rna import RNA_CLASSES, RNADataset, rna_path
 from torch_edgevf.learning.models import DiffusionNet, EdgeFieldNet
 
 HERE = Path(__file__).resolve().parent
+#: the operator cache of the study's commands: $TORCH_EDGEVF_CACHE, else ~/.cache/torch_edgevf/rna
+DEFAULT_CACHE = os.environ.get("TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "rna"))
 
 #: the networks, by name: the recommended edge-field network, the faithful DiffusionNet, and
 #: the edge network's ablations (no vector stream; vertex gradients in place of G; the divergence
@@ -252,7 +254,7 @@ def parse(argv=None):
     p.add_argument("--limit", type=int, default=None, help="first N training and N test meshes only")
     p.add_argument(
         "--cache",
-        default=os.environ.get("TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "rna")),
+        default=DEFAULT_CACHE,
         help="operator cache folder (default: $TORCH_EDGEVF_CACHE or ~/.cache/torch_edgevf/rna)",
     )
     p.add_argument("--run-dir", default=str(HERE / "runs"), help="logs and checkpoints")
