@@ -7,6 +7,7 @@ outputs, for its tests.
 top-level modules.
 """
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -23,9 +24,15 @@ sys.path.insert(0, str(STUDY))
 import psb_data  # noqa: E402
 import psb_report  # noqa: E402
 import psb_training  # noqa: E402
-import run  # noqa: E402
 import variants  # noqa: E402
 import variants_common  # noqa: E402
+
+# ``run.py`` is loaded under its own name: the RNA study has a ``run.py`` too, and both may be
+# imported by one test process
+_spec = importlib.util.spec_from_file_location("psb_run", STUDY / "run.py")
+run = importlib.util.module_from_spec(_spec)
+sys.modules["psb_run"] = run
+_spec.loader.exec_module(run)
 
 __all__ = [
     "README",
