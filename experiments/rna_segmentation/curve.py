@@ -6,8 +6,9 @@ its learning when the protocol's epochs end.
 
 Each checkpoint is one written by ``run.py`` (``--run-dir``; a copy taken after some epoch);
 its weights are scored as ``run.py`` scores the final ones: every vertex of the test files
-of the split (at the file's resolution). The curve measures how much accuracy the last
-epochs still add; it does not choose weights (the study reports the final ones only).
+of the split (at the file's resolution), each file read once for all the checkpoints. The
+curve measures how much accuracy the last epochs still add; it does not choose weights (the
+study reports the final ones only).
 """
 
 from __future__ import annotations
@@ -52,20 +53,24 @@ def main(argv=None) -> int:
     test = RNADataset(
         root, names, target_vertices=None, in_memory=False, **rna_run.dataset_options(a.cache, a.inputs)
     )
-    rows = []
+    rows, models = [], []
     for path in a.checkpoints:
         saved = torch.load(path, weights_only=False)
         model = rna_run.build_model(a.model, test[0].features.shape[1], a.width)
         model.load_state_dict(saved["model"])
+        models.append(model)
         history = saved["state"]["history"]
-        row = {
-            "model": a.model,
-            "checkpoint": Path(path).name,
-            "epoch": saved["state"]["epoch"],
-            "train_accuracy": history[-1]["train_accuracy"] if history else None,
-            **rna_run.evaluate(model, test),
-        }
-        rows.append(row)
+        rows.append(
+            {
+                "model": a.model,
+                "split": Path(a.split).name if a.split else "official",
+                "checkpoint": Path(path).name,
+                "epoch": saved["state"]["epoch"],
+                "train_accuracy": history[-1]["train_accuracy"] if history else None,
+            }
+        )
+    for row, scored in zip(rows, rna_run.evaluate_many(models, test), strict=True):
+        row.update(scored)
         print(
             f"{row['checkpoint']}: epoch {row['epoch']}, test accuracy {row['test_accuracy']:.4f}, "
             f"mIoU {row['test_miou']:.4f}",

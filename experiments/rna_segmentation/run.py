@@ -110,22 +110,34 @@ def scores(conf: np.ndarray) -> tuple[float, float]:
 def evaluate(model, dataset: RNADataset, device="cpu") -> dict:
     """Accuracy and mIoU on the file's vertices of every mesh of ``dataset`` (and on the
     network's vertices), the network run on ``device``."""
-    model.eval()
-    conf = np.zeros((RNA_CLASSES, RNA_CLASSES), dtype=np.int64)
-    conf_mesh = np.zeros_like(conf)
-    for i, mesh in enumerate(dataset.meshes):
-        sample = dataset[i]
-        pred = model(collate_meshes([sample]).to(device)).argmax(-1).cpu()
-        conf += confusion(mesh.carry_back(pred).numpy(), mesh.labels)
-        conf_mesh += confusion(pred.numpy(), mesh.mesh_labels)
-    model.train()
-    acc, miou = scores(conf)
-    return {
-        "test_accuracy": acc,
-        "test_miou": miou,
-        "test_vertices": int(conf.sum()),
-        "test_accuracy_mesh_vertices": scores(conf_mesh)[0],
-    }
+    return evaluate_many([model], dataset, device)[0]
+
+
+def evaluate_many(models: list, dataset: RNADataset, device="cpu") -> list[dict]:
+    """:func:`evaluate` of several networks, each mesh read once for all of them."""
+    conf = np.zeros((len(models), 2, RNA_CLASSES, RNA_CLASSES), dtype=np.int64)
+    for model in models:
+        model.eval()
+    with torch.no_grad():
+        for i, mesh in enumerate(dataset.meshes):
+            batch = collate_meshes([dataset[i]]).to(device)
+            for m, model in enumerate(models):
+                pred = model(batch).argmax(-1).cpu()
+                conf[m, 0] += confusion(mesh.carry_back(pred).numpy(), mesh.labels)
+                conf[m, 1] += confusion(pred.numpy(), mesh.mesh_labels)
+    rows = []
+    for m, model in enumerate(models):
+        model.train()
+        acc, miou = scores(conf[m, 0])
+        rows.append(
+            {
+                "test_accuracy": acc,
+                "test_miou": miou,
+                "test_vertices": int(conf[m, 0].sum()),
+                "test_accuracy_mesh_vertices": scores(conf[m, 1])[0],
+            }
+        )
+    return rows
 
 
 def log(path: Path, message: str) -> None:

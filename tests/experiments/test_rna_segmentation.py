@@ -76,16 +76,19 @@ def test_quick_run_writes_the_json_rows_and_resumes(tmp_path):
     accuracy = float(out.stdout.split("accuracy ")[-1])
     assert accuracy == pytest.approx(rows[0]["test_accuracy"], abs=1e-9)  # the run's score of 3CXC_9
     _assert_three_coloured_panels(png)
-    # the learning curve's score of the final checkpoint is the run's
+    # the learning curve's score of the final checkpoint is the run's (given twice: every
+    # checkpoint is scored on each mesh as it is read)
     curve = [sys.executable, str(RUN.with_name("curve.py")), "--data", str(sample), "--split", str(split)]
     curve += ["--model", "edgefieldnet", "--width", "8", "--cache", str(tmp_path / "cache")]
-    curve += ["--checkpoints", str(tmp_path / "runs" / "split-edgefieldnet-seed0.pt")]
+    curve += ["--checkpoints", *[str(tmp_path / "runs" / "split-edgefieldnet-seed0.pt")] * 2]
     out = subprocess.run([*curve, "--json", str(tmp_path / "curve.json")], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    (point,) = json.loads((tmp_path / "curve.json").read_text())["curve"]
-    assert point["epoch"] == 2 and point["test_vertices"] == 15225
-    assert point["test_accuracy"] == pytest.approx(rows[0]["test_accuracy"], abs=1e-12)
-    out = subprocess.run([*curve[:-1], str(tmp_path / "absent.pt")], capture_output=True, text=True)
+    points = json.loads((tmp_path / "curve.json").read_text())["curve"]
+    assert len(points) == 2
+    for point in points:
+        assert point["epoch"] == 2 and point["test_vertices"] == 15225 and point["split"] == "split.json"
+        assert point["test_accuracy"] == pytest.approx(rows[0]["test_accuracy"], abs=1e-12)
+    out = subprocess.run([*curve[:-2], str(tmp_path / "absent.pt")], capture_output=True, text=True)
     assert out.returncode == 2 and "no checkpoint file at" in out.stderr
     # --device cpu (the default, named), trained afresh: the same numbers
     args[args.index(str(tmp_path / "runs"))] = str(tmp_path / "runs-cpu")
