@@ -9,6 +9,11 @@ its weights are scored as ``run.py`` scores the final ones: every vertex of the 
 of the split (at the file's resolution), each file read once for all the checkpoints. The
 curve measures how much accuracy the last epochs still add; it does not choose weights (the
 study reports the final ones only).
+
+With ``--part train`` it scores training meshes instead, as the network was trained on them
+(decimated), with dropout off: a network that scores no better there than on the test files
+is short of capacity or training, not overfitting. (The rows' ``test_*`` keys then hold the
+scores of that part.)
 """
 
 from __future__ import annotations
@@ -35,7 +40,14 @@ def main(argv=None) -> int:
     p.add_argument("--checkpoints", nargs="+", required=True, help="checkpoints written by run.py")
     p.add_argument("--width", type=int, default=128)
     p.add_argument("--inputs", choices=rna_run.INPUTS, default="loghks")
-    p.add_argument("--limit", type=int, default=None, help="first N test meshes only")
+    p.add_argument(
+        "--part",
+        choices=("test", "train"),
+        default="test",
+        help="score the test files (default), or the training meshes as trained (decimated, in eval mode)",
+    )
+    p.add_argument("--target-vertices", type=int, default=5000, help="the runs' decimation (train part)")
+    p.add_argument("--limit", type=int, default=None, help="first N meshes of the part only")
     p.add_argument("--cache", default=rna_run.DEFAULT_CACHE, help="operator cache folder (as run.py's)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--json", default=None, help="write the rows here")
@@ -46,12 +58,13 @@ def main(argv=None) -> int:
         if missing:
             raise ValueError(f"no checkpoint file at {', '.join(missing)}")
         root = rna_path(a.data)
-        names = rna_split(root, a.split)["test"][: a.limit]
+        names = rna_split(root, a.split)[a.part][: a.limit]
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    target = a.target_vertices if a.part == "train" else None
     test = RNADataset(
-        root, names, target_vertices=None, in_memory=False, **rna_run.dataset_options(a.cache, a.inputs)
+        root, names, target_vertices=target, in_memory=False, **rna_run.dataset_options(a.cache, a.inputs)
     )
     rows, models = [], []
     for path in a.checkpoints:
@@ -64,6 +77,8 @@ def main(argv=None) -> int:
             {
                 "model": a.model,
                 "split": Path(a.split).name if a.split else "official",
+                "part": a.part,
+                "meshes": len(names),
                 "checkpoint": Path(path).name,
                 "epoch": saved["state"]["epoch"],
                 "train_accuracy": history[-1]["train_accuracy"] if history else None,

@@ -79,23 +79,24 @@ def validation_table(rows: list[dict]) -> str:
 
 def curve_table(folder: Path = HERE / "runs" / "curves") -> str:
     """Test accuracy (training accuracy) of each run's checkpoints by epoch, from ``curve.py --json``."""
-    points: dict[tuple[str, str, str], dict[int, dict]] = {}
+    points: dict[tuple[str, str, str, str], dict[int, dict]] = {}
     for path in sorted(folder.glob("*.json")):
         for r in json.loads(path.read_text())["curve"]:
             run = re.sub(r"(-e\d+)?\.pt$", "", r["checkpoint"])
-            points.setdefault((r["model"], r["split"], run), {})[r["epoch"]] = r
+            part = f"{r.get('part', 'test')} ({r['meshes']} meshes)" if "meshes" in r else "test"
+            points.setdefault((r["model"], r["split"], run, part), {})[r["epoch"]] = r
     epochs = sorted({e for by_epoch in points.values() for e in by_epoch})
     lines = [
-        "| network | split | run | " + " | ".join(f"epoch {e}" for e in epochs) + " |",
-        "|---|---|---|" + "---:|" * len(epochs),
+        "| network | split | run | scored on | " + " | ".join(f"epoch {e}" for e in epochs) + " |",
+        "|---|---|---|---|" + "---:|" * len(epochs),
     ]
-    for (model, split, run), by_epoch in points.items():
+    for (model, split, run, part), by_epoch in points.items():
         cells = []
         for e in epochs:
             r = by_epoch.get(e)
             train = "" if r is None or r["train_accuracy"] is None else f" ({100 * r['train_accuracy']:.1f})"
             cells.append("" if r is None else f"{100 * r['test_accuracy']:.1f}{train}")
-        lines.append(f"| {NAMES.get(model, model)} | {split} | {run} | " + " | ".join(cells) + " |")
+        lines.append(f"| {NAMES.get(model, model)} | {split} | {run} | {part} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -88,6 +88,12 @@ def test_quick_run_writes_the_json_rows_and_resumes(tmp_path):
     for point in points:
         assert point["epoch"] == 2 and point["test_vertices"] == 15225 and point["split"] == "split.json"
         assert point["test_accuracy"] == pytest.approx(rows[0]["test_accuracy"], abs=1e-12)
+    # ... and it scores the training meshes, decimated as trained, when asked
+    train = [*curve[:-1], "--part", "train", "--limit", "1", "--target-vertices", "400"]
+    out = subprocess.run([*train, "--json", str(tmp_path / "train.json")], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    (point,) = json.loads((tmp_path / "train.json").read_text())["curve"]
+    assert point["part"] == "train" and point["meshes"] == 1 and 0 <= point["test_accuracy"] <= 1
     out = subprocess.run([*curve[:-2], str(tmp_path / "absent.pt")], capture_output=True, text=True)
     assert out.returncode == 2 and "no checkpoint file at" in out.stderr
     # --device cpu (the default, named), trained afresh: the same numbers
