@@ -90,7 +90,10 @@ def curve_table(folder: Path = HERE / "runs" / "curves") -> str:
         "| network | split | run | scored on | " + " | ".join(f"epoch {e}" for e in epochs) + " |",
         "|---|---|---|---|" + "---:|" * len(epochs),
     ]
-    for (model, split, run, part), by_epoch in points.items():
+    order = list(NAMES)
+    for (model, split, run, part), by_epoch in sorted(
+        points.items(), key=lambda item: (item[0][3], order.index(item[0][0]) if item[0][0] in order else 99)
+    ):
         cells = []
         for e in epochs:
             r = by_epoch.get(e)
