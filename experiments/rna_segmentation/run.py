@@ -319,6 +319,16 @@ def main(argv=None) -> int:
         f"{precompute:.0f} s, {len(skipped)} skipped{names})",
         flush=True,
     )
+    empty = ["training"] if not len(train_set) else []
+    empty += ["test"] if not all(len(t) for t in test_sets.values()) else []
+    if empty:
+        reasons = list(dict.fromkeys(why for _, why in skipped))
+        more = f" (and {len(reasons) - 3} more)" if len(reasons) > 3 else ""
+        print(
+            f"error: no {' and no '.join(empty)} mesh could be used: {'; '.join(reasons[:3])}{more}",
+            file=sys.stderr,
+        )
+        return 2
     if a.precompute_only:
         return 0
     tag = "" if a.split is None else Path(a.split).stem + "-"

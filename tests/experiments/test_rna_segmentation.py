@@ -36,7 +36,23 @@ def test_a_device_torch_cannot_use_is_named(tmp_path):
     assert out.returncode == 2 and "'nonsense' is not a device" in out.stderr
 
 
+def test_a_run_without_usable_meshes_names_them(tmp_path):
+    """Every mesh skipped (here: faces naming vertices the file lacks): an error naming the
+    meshes and the problem, not a traceback."""
+    (tmp_path / "off").mkdir()
+    (tmp_path / "labels").mkdir()
+    for name in ("BAD_A", "BAD_B"):
+        (tmp_path / "off" / f"{name}.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+        (tmp_path / "labels" / f"{name}.txt").write_text("1\n1\n1\n")
+    (tmp_path / "train.txt").write_text("BAD_A\n")
+    (tmp_path / "test.txt").write_text("BAD_B\n")
+    out = _run("--data", str(tmp_path), "--cache", str(tmp_path / "cache"), check=False)
+    assert out.returncode == 2, out.stderr
+    assert "no training" in out.stderr and "BAD_A" in out.stderr and "Traceback" not in out.stderr
+
+
 def test_quick_run_writes_the_json_rows_and_resumes(tmp_path):
+    pytest.importorskip("fast_simplification")  # the training meshes are decimated
     sample = shared_path("datasets", "rna_sample")
     split = tmp_path / "split.json"
     split.write_text(json.dumps({"train": ["4V48_A9", "5J8A_DB"], "test": ["3CXC_9"]}))
