@@ -55,14 +55,21 @@ SHARED = Path(os.environ.get("TORCH_EDGEVF_TEST_DATA") or Path(__file__).resolve
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def load_example(name: str):
-    """Import ``examples/<name>.py`` as a module (the examples are scripts, not a package)."""
+def load_script(path: Path, name: str):
+    """Import the script at ``path`` as the module ``name`` (scripts are not a package; two
+    studies' ``run.py`` get different names, so one test process can hold both)."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def load_example(name: str):
+    """Import ``examples/<name>.py`` as a module."""
+    return load_script(EXAMPLES / f"{name}.py", name)
 
 
 def record_instances(monkeypatch, module, name: str) -> list:

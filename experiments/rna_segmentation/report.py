@@ -83,7 +83,7 @@ def curve_table(folder: Path = HERE / "runs" / "curves") -> str:
     for path in sorted(folder.glob("*.json")):
         for r in json.loads(path.read_text())["curve"]:
             run = re.sub(r"(-e\d+)?\.pt$", "", r["checkpoint"])
-            part = f"{r.get('part', 'test')} ({r['meshes']} meshes)" if "meshes" in r else "test"
+            part = f"{r['part']} ({r['meshes']} meshes)"
             points.setdefault((r["model"], r["split"], run, part), {})[r["epoch"]] = r
     epochs = sorted({e for by_epoch in points.values() for e in by_epoch})
     lines = [

@@ -7,7 +7,6 @@ outputs, for its tests.
 top-level modules.
 """
 
-import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -16,6 +15,8 @@ import numpy as np
 import torch
 
 from torch_edgevf.learning import batching, precompute
+
+from conftest import load_script
 
 #: the study's folder
 STUDY = Path(__file__).resolve().parents[2] / "experiments" / "psb_classification"
@@ -27,12 +28,7 @@ import psb_training  # noqa: E402
 import variants  # noqa: E402
 import variants_common  # noqa: E402
 
-# ``run.py`` is loaded under its own name: the RNA study has a ``run.py`` too, and both may be
-# imported by one test process
-_spec = importlib.util.spec_from_file_location("psb_run", STUDY / "run.py")
-run = importlib.util.module_from_spec(_spec)
-sys.modules["psb_run"] = run
-_spec.loader.exec_module(run)
+run = load_script(STUDY / "run.py", "psb_run")  # the RNA study has a ``run.py`` too
 
 __all__ = [
     "README",

@@ -1,7 +1,5 @@
 """experiments/psb_classification/probe.py: the study's linear probes, on a small subset."""
 
-import importlib.util
-
 import pytest
 import torch
 
@@ -9,6 +7,7 @@ from torch_edgevf import icosphere
 from torch_edgevf.learning.batching import MeshBatch
 from torch_edgevf.learning.precompute import compute_operators, heat_kernel_signature
 
+from conftest import load_script
 from study import STUDY
 
 PROBE = STUDY / "probe.py"
@@ -16,10 +15,7 @@ PROBE = STUDY / "probe.py"
 
 @pytest.fixture(scope="module")
 def probe_module():
-    spec = importlib.util.spec_from_file_location("probe", PROBE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(PROBE, "probe")
 
 
 def test_pooled_is_the_weighted_mean_and_deviation(probe_module):

@@ -1,6 +1,5 @@
 """The RNA segmentation experiment's command: help, JSON rows, a bad folder, resuming."""
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -8,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import shared_path
+from conftest import load_script, shared_path
 
 RUN = Path(__file__).resolve().parents[2] / "experiments" / "rna_segmentation" / "run.py"
 
@@ -158,9 +157,7 @@ def test_every_model_gives_every_vertex_a_score_of_every_class():
     import torch_edgevf as ev
     from torch_edgevf.learning import MeshSample, collate_meshes, compute_operators, heat_kernel_signature
 
-    spec = importlib.util.spec_from_file_location("rna_run", RUN)  # not ``run``: PSB's has that name
-    rna_run = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(rna_run)
+    rna_run = load_script(RUN, "rna_run")  # not ``run``: PSB's has that name
 
     v, f = ev.icosphere(2)
     ops = compute_operators(v, f, k_edge=16, k_vertex=16, vertex_gradient=True, dtype=torch.float32)
@@ -173,6 +170,13 @@ def test_every_model_gives_every_vertex_a_score_of_every_class():
         assert logits.shape == (len(v), 260) and torch.isfinite(logits).all(), name
         torch.nn.functional.cross_entropy(logits, batch.labels).backward()
         assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters()), name
+
+
+def _basis_share(*args, timeout=600):
+    """``basis_share.py`` on the shared RNA sample."""
+    script = [sys.executable, str(RUN.with_name("basis_share.py"))]
+    script += ["--data", str(shared_path("datasets", "rna_sample"))]
+    return subprocess.run([*script, *args], capture_output=True, text=True, timeout=timeout)
 
 
 def test_basis_share_is_one_in_the_span_and_small_for_gradients():
@@ -197,53 +201,19 @@ def test_basis_share_is_one_in_the_span_and_small_for_gradients():
     smooth = ops.vertex_evecs[:, 1:4]  # the sphere's l = 1 functions: their gradients are smooth
     kept = basis_share.kept_share(ops.gradient, mass, ops.edge_evecs, smooth)
     assert bool((kept > 0.99).all()), kept
-    sample = shared_path("datasets", "rna_sample")
-    script = RUN.with_name("basis_share.py")
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(script),
-            "--data",
-            str(sample),
-            "--meshes",
-            "3CXC_9",
-            "--target-vertices",
-            "1500",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    out = _basis_share("--meshes", "3CXC_9", "--target-vertices", "1500")
     assert out.returncode == 0, out.stderr
     rows = [line.split("|")[1:-1] for line in out.stdout.splitlines() if line.startswith("| 3CXC_9")]
     assert [r[2].strip() for r in rows] == ["log-HKS", "label indicators"]
     assert all(0 <= float(r[3]) <= 1 for r in rows)
-    bad = subprocess.run(
-        [sys.executable, str(script), "--data", str(sample), "--meshes", "NOPE"],
-        capture_output=True,
-        text=True,
-    )
+    bad = _basis_share("--meshes", "NOPE")
     assert bad.returncode == 2 and "NOPE" in bad.stderr
 
 
 @pytest.mark.slow
 def test_readme_basis_share_table_is_what_the_command_prints():
     pytest.importorskip("fast_simplification")
-    sample = shared_path("datasets", "rna_sample")
-    out = subprocess.run(
-        [
-            sys.executable,
-            str(RUN.with_name("basis_share.py")),
-            "--data",
-            str(sample),
-            "--meshes",
-            "3CXC_9",
-            "4P6F_RB",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
+    out = _basis_share("--meshes", "3CXC_9", "4P6F_RB", timeout=900)
     assert out.returncode == 0, out.stderr
     readme = RUN.with_name("README.md").read_text()
     rows = [
