@@ -64,20 +64,24 @@ def build_model(name: str, in_channels: int, width: int) -> torch.nn.Module:
     common = dict(width=width, num_blocks=4, mlp=(width, width), head="vertex")
     if name == "diffusionnet":
         return DiffusionNet(in_channels, RNA_CLASSES, **common)
-    if name in ("edgefieldnet-divcurl", "edgefieldnet-local"):
+    if name == "edgefieldnet-divcurl":
         sys.path.insert(0, str(HERE.parent / "psb_classification"))
         from variants import StudyEdgeFieldNet
 
-        # divcurl: the divergence and curl of the fields in the MLPs as well; local: the fields
-        # M_z^-1 G (xd W) on the edges as they are (every edge, no L_c diffusion, no eigenbasis)
-        options = (
-            dict(divergence=True)
-            if name == "edgefieldnet-divcurl"
-            else dict(divergence=False, field_diffusion=False)
-        )
-        return StudyEdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, **options, **common)
-    vector = {"edgefieldnet": "edge", "edgefieldnet-scalar": "none", "edgefieldnet-vertexvec": "vertex"}[name]
-    return EdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, vector=vector, **common)
+        # the divergence and curl of the fields in the MLPs as well
+        return StudyEdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, divergence=True, **common)
+    # local: the fields M_z^-1 G (xd W) on the edges as they are (no L_c diffusion, no eigenbasis;
+    # the same numbers, parameters and initialisation as the PSB study's variant of that name
+    # without divergence and curl, with which its first runs were made)
+    vector, fields = {
+        "edgefieldnet": ("edge", "smooth"),
+        "edgefieldnet-local": ("edge", "local"),
+        "edgefieldnet-scalar": ("none", "smooth"),
+        "edgefieldnet-vertexvec": ("vertex", "smooth"),
+    }[name]
+    return EdgeFieldNet(
+        in_channels, RNA_CLASSES, vector_width=width // 4, vector=vector, fields=fields, **common
+    )
 
 
 def dataset_options(cache: str | None, inputs: str = "loghks") -> dict:

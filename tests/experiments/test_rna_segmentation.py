@@ -172,6 +172,44 @@ def test_every_model_gives_every_vertex_a_score_of_every_class():
         assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters()), name
 
 
+def test_the_local_fields_network_is_the_one_its_first_runs_trained():
+    """``edgefieldnet-local`` is the library's ``EdgeFieldNet(fields="local")``; its seed-0 run
+    trained the PSB study's variant without diffusion of the fields and without divergence and
+    curl: the same parameters, drawn alike from a seed, give the same logits."""
+    import torch
+
+    import torch_edgevf as ev
+    from torch_edgevf.learning import MeshSample, collate_meshes, compute_operators, heat_kernel_signature
+
+    rna_run = load_script(RUN, "rna_run")
+    variants = load_script(RUN.parents[1] / "psb_classification" / "variants.py", "psb_variants")
+    v, f = ev.icosphere(2)
+    ops = compute_operators(v, f, k_edge=0, k_vertex=16)
+    x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16, log=True)
+    batch = collate_meshes([MeshSample(ops, x, 0)])
+    torch.manual_seed(0)
+    library = rna_run.build_model("edgefieldnet-local", 16, 16).double().eval()
+    assert library.fields == "local"
+    torch.manual_seed(0)
+    study = variants.StudyEdgeFieldNet(
+        16,
+        260,
+        width=16,
+        vector_width=4,
+        num_blocks=4,
+        mlp=(16, 16),
+        head="vertex",
+        divergence=False,
+        field_diffusion=False,
+    )
+    study = study.double().eval()
+    assert [n for n, _ in library.named_parameters()] == [n for n, _ in study.named_parameters()]
+    with torch.no_grad():
+        want = study(batch)
+        assert want.abs().max() > 1e-3
+        torch.testing.assert_close(library(batch), want, rtol=0, atol=0)
+
+
 def _basis_share(*args, timeout=600):
     """``basis_share.py`` on the shared RNA sample."""
     script = [sys.executable, str(RUN.with_name("basis_share.py"))]

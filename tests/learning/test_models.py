@@ -50,6 +50,7 @@ def _small_edge_net(**options):
 
 NETWORKS = {
     "edge": _small_edge_net(),
+    "edge-local": _small_edge_net(fields="local"),
     "edge-vertex": _small_edge_net(vector="vertex"),
     "edge-none": _small_edge_net(vector="none"),
     "diffusionnet": lambda head: models.DiffusionNet(8, 5, width=8, num_blocks=2, mlp=(8,), head=head),
@@ -133,19 +134,63 @@ def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh,
         torch.testing.assert_close(g, w, rtol=1e-9, atol=1e-12)
 
 
-@pytest.mark.parametrize("vector", ["edge", "vertex"])
-def test_edge_field_block_gradcheck(vector):
-    """Float64 gradcheck of a block in its scalars, its fields and both diffusion times."""
+def _local_block_on_the_edges(block, x, z, batch):
+    """The block with local fields as its formula reads, with the public layers: the
+    gradients ``M_z^-1 G (xd W)`` plus the carried fields, no diffusion of the fields."""
+    t = block.diffusion.times
+    xd = layers.spectral_diffusion(
+        x, batch.vertex_evals, batch.vertex_evecs, batch.vertex_mass, t, batch.vertex_offsets
+    )
+    a = torch.view_as_complex(block.lift(xd).unflatten(1, (block.vector_width, 2)).contiguous())
+    u = layers.gradient_features(a, batch.gradient, batch.edge_mass) + block.mix(z)
+    inv = torch.tanh(layers.invariant_features(u, block.products, modulus=False))
+    inv = layers.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
+    return x + block.mlp(torch.cat([x, xd, inv], dim=1)), z + u
+
+
+def test_local_fields_are_the_gradients_on_the_edges(mesh):
+    """``fields="local"``: the block's fields are ``M_z^-1 G (xd W)`` (plus the carried ones)
+    on every edge, the same numbers as the formula with the public layers, on a batch of two
+    meshes whose operators hold no eigenpair of ``L_c`` (``k_edge=0``)."""
+    local = dict(OPTIONS, k_edge=0)
+    samples = []
+    for v, f in (mesh, perturbed_icosphere(1, 0.05, seed=7)):
+        ops = precompute.compute_operators(v, f, **local)
+        assert ops.edge_evecs.shape == (ops.edges.shape[0], 0) and ops.edge_evals.shape == (0,)
+        x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8, log=True)
+        samples.append(batching.MeshSample(ops, x, 0))
+    pair = batching.collate_meshes(samples)
+    torch.manual_seed(0)
+    block = models.EdgeFieldBlock(8, 4, mlp=(8,), dropout=0.0, fields="local").double()
+    assert block.field_diffusion is None
+    with torch.no_grad():
+        block.diffusion.raw_times.uniform_(0.0, 0.05)
+    x = torch.randn(pair.num_vertices, 8, dtype=torch.float64)
+    z = torch.randn(pair.num_edges, 4, dtype=torch.complex128)
+    got, want = block(x, z, pair), _local_block_on_the_edges(block, x, z, pair)
+    for g, w in zip(got, want):
+        assert w.abs().max() > 1e-3
+        torch.testing.assert_close(g, w, rtol=1e-12, atol=1e-12)
+    # the network on the same batch: per-vertex outputs; the smooth fields need L_c's eigenpairs
+    net = models.EdgeFieldNet(8, 3, width=8, vector_width=4, num_blocks=2, head="vertex", fields="local")
+    assert net.double()(pair).shape == (pair.num_vertices, 3)
+    with pytest.raises(ValueError, match="fields='smooth' needs the eigenpairs of L_c.*k_edge=0"):
+        models.EdgeFieldNet(8, 3, width=8, num_blocks=1).double()(pair)
+
+
+@pytest.mark.parametrize("vector, fields", [("edge", "smooth"), ("edge", "local"), ("vertex", "smooth")])
+def test_edge_field_block_gradcheck(vector, fields):
+    """Float64 gradcheck of a block in its scalars, its fields and its diffusion times."""
     v, f = perturbed_icosphere(1, 0.08, seed=4)
     batch = _batch(v, f)
     torch.manual_seed(0)
-    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, vector=vector).double()
+    block = models.EdgeFieldBlock(3, 2, mlp=(4,), dropout=0.0, vector=vector, fields=fields).double()
     with torch.no_grad():  # nonzero times, so that the diffusion is exercised
         block.diffusion.raw_times.fill_(0.05)
     x = torch.randn(batch.num_vertices, 3, dtype=torch.float64, requires_grad=True)
     rows = batch.num_edges if vector == "edge" else batch.num_vertices
     z = torch.randn(rows, 2, dtype=torch.complex128, requires_grad=True)
-    times = [block.diffusion] + ([block.field_diffusion] if vector == "edge" else [])
+    times = [block.diffusion] + ([block.field_diffusion] if block.field_diffusion is not None else [])
     raw = [d.raw_times.detach().clone().fill_(0.05).requires_grad_(True) for d in times]
     for d in times:
         del d.raw_times
@@ -160,19 +205,22 @@ def test_edge_field_block_gradcheck(vector):
 
 
 def test_forward_spectral_needs_edge_fields():
-    block = models.EdgeFieldBlock(4, 2, vector="vertex")
-    with pytest.raises(ValueError, match="forward_spectral needs vector='edge'"):
-        block.forward_spectral(torch.zeros(3, 4), None, None)
+    for options in (dict(vector="vertex"), dict(fields="local")):
+        block = models.EdgeFieldBlock(4, 2, **options)
+        with pytest.raises(ValueError, match="forward_spectral needs vector='edge' and fields='smooth'"):
+            block.forward_spectral(torch.zeros(3, 4), None, None)
 
 
-@pytest.mark.parametrize("vector", ["edge", "vertex", "none"])
-def test_network_gradcheck_in_the_features(vector):
+@pytest.mark.parametrize(
+    "vector, fields", [("edge", "smooth"), ("edge", "local"), ("vertex", "smooth"), ("none", "smooth")]
+)
+def test_network_gradcheck_in_the_features(vector, fields):
     """Float64 gradcheck through the whole network: blocks and the mean readout."""
     v, f = perturbed_icosphere(1, 0.08, seed=5)
     batch = _batch(v, f)
     torch.manual_seed(0)
     net = models.EdgeFieldNet(
-        8, 3, width=4, vector_width=2, num_blocks=2, mlp=(4,), dropout=0.0, vector=vector
+        8, 3, width=4, vector_width=2, num_blocks=2, mlp=(4,), dropout=0.0, vector=vector, fields=fields
     )
     net = net.double()
     with torch.no_grad():
@@ -238,12 +286,14 @@ def test_log_heat_kernel_signatures_and_their_check(mesh):
         (dict(width=0), "width must be a positive integer"),
         (dict(num_blocks=-1), "num_blocks must be a positive integer"),
         (dict(vector_width=0), "vector_width must be a positive integer"),
+        (dict(fields="rough"), "fields must be one of"),
+        (dict(fields="local", vector="vertex"), "fields='local' needs vector='edge'"),
     ],
 )
 def test_bad_options_are_named(kwargs, match):
     with pytest.raises(ValueError, match=match):
         models.EdgeFieldNet(8, 5, **kwargs)
-    if "vector" not in kwargs and "vector_width" not in kwargs:
+    if not {"vector", "vector_width", "fields"} & set(kwargs):
         with pytest.raises(ValueError, match=match):
             models.DiffusionNet(8, 5, **kwargs)
 
@@ -272,10 +322,11 @@ def test_missing_operators_are_named(mesh):
 # --------------------------------------------------------------------------- learning
 
 
-def test_edge_field_net_learns_generated_shapes():
+@pytest.mark.parametrize("fields", ["smooth", "local"])
+def test_edge_field_net_learns_generated_shapes(fields):
     train, test = generated_shapes_task(_batch)
     torch.manual_seed(0)
-    net = models.EdgeFieldNet(8, 4, width=16, vector_width=8, num_blocks=2, mlp=(16,))
+    net = models.EdgeFieldNet(8, 4, width=16, vector_width=8, num_blocks=2, mlp=(16,), fields=fields)
     train_classifier(net, train, epochs=15)
     assert classification_accuracy(net, test) >= 0.75  # chance: 0.25
     assert classification_accuracy(net, train) >= 0.75

@@ -320,7 +320,9 @@ def compute_operators(
     faces : (F, 3) int tensor or array, or a Topology
     n : int >= 1, symmetry order of ``L_c``
     k_edge, k_vertex : int, numbers of eigenpairs of ``(L_c, M_z)`` and of the vertex
-        Laplacian (with the lumped vertex mass)
+        Laplacian (with the lumped vertex mass); ``k_edge=0`` computes none of ``L_c``
+        (``edge_evals`` and ``edge_evecs`` empty: for networks that do not use them, such as
+        ``EdgeFieldNet(fields="local")``)
     vertex_laplacian : {"cotan", "edge", "robust"}
         ``"cotan"``: cotangent Laplacian with the lumped vertex mass;
         ``"edge"``: ``L = G^* M_z^{-1} G`` of thesis 4.2 with the lumped vertex mass;
@@ -373,9 +375,9 @@ def _compute_operators(
     verts = verts.to(device="cpu", dtype=torch.float64)
     topo = faces if isinstance(faces, Topology) else Topology(faces, num_vertices=verts.shape[0])
     ne, nv = topo.num_edges, topo.num_vertices
-    for name, k, size in (("k_edge", k_edge, ne), ("k_vertex", k_vertex, nv)):
-        if not isinstance(k, int) or not 1 <= k < size:
-            raise ValueError(f"{name} must be an integer in [1, {size - 1}], got {k!r}")
+    for name, k, size, least in (("k_edge", k_edge, ne, 0), ("k_vertex", k_vertex, nv, 1)):
+        if not isinstance(k, int) or isinstance(k, bool) or not least <= k < size:
+            raise ValueError(f"{name} must be an integer in [{least}, {size - 1}], got {k!r}")
     geometry = _intrinsic_geometry(verts, topo)
     edge_mass = ops.mass_matrix(geometry, topo).values()
     Lc = ops.connection_laplacian(geometry, topo, n)
@@ -389,11 +391,15 @@ def _compute_operators(
             else ops.laplace_beltrami(geometry, topo)
         )
     with torch.no_grad():
-        edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
         vertex = eigsh(Lv, vmass, k_vertex, tol=tol)
+        if k_edge:
+            edge = eigsh(Lc, edge_mass, k_edge, tol=tol)
+            ew, ev = edge.values.clamp_min(0.0), edge.vectors
+        else:  # none asked: empty, so that batches and caches keep one layout
+            ew = edge_mass.new_zeros(0)
+            ev = torch.zeros(ne, 0, dtype=Lc.dtype)
     # eigsh makes the largest-modulus entry of every eigenvector real positive: a
     # deterministic sign (the models only use sign-invariant quantities)
-    ew, ev = edge.values.clamp_min(0.0), edge.vectors
     vw, vv = vertex.values.clamp_min(0.0), vertex.vectors
     out = MeshOperators(
         verts=verts,

@@ -18,7 +18,9 @@ from ..layers.pooling import _pool_edges_to_vertices, _pool_global
 __all__ = [
     "HEADS",
     "VECTORS",
+    "FIELDS",
     "check_options",
+    "check_vector_options",
     "as_mesh_batch",
     "check_batch",
     "mini_mlp",
@@ -36,6 +38,8 @@ __all__ = [
 HEADS = ("global", "vertex", "face")
 #: the vector stream of :class:`~torch_edgevf.learning.models.EdgeFieldNet`
 VECTORS = ("edge", "vertex", "none")
+#: the fields of its edge stream: diffused in the L_c eigenbasis, or local on every edge
+FIELDS = ("smooth", "local")
 
 
 def check_options(in_channels, out_channels, width, num_blocks, head, dropout) -> None:
@@ -52,6 +56,17 @@ def check_options(in_channels, out_channels, width, num_blocks, head, dropout) -
         raise ValueError(f"head must be one of {HEADS}, got {head!r}")
     if isinstance(dropout, bool) or not isinstance(dropout, (int, float)) or not 0 <= dropout < 1:
         raise ValueError(f"dropout must be a probability in [0, 1), got {dropout!r}")
+
+
+def check_vector_options(vector, fields) -> None:
+    """``ValueError`` for a vector stream or a kind of fields that is not one, or fields
+    chosen for a stream that has no edge fields."""
+    if vector not in VECTORS:
+        raise ValueError(f"vector must be one of {VECTORS}, got {vector!r}")
+    if fields not in FIELDS:
+        raise ValueError(f"fields must be one of {FIELDS}, got {fields!r}")
+    if fields != "smooth" and vector != "edge":
+        raise ValueError(f"fields={fields!r} needs vector='edge' (the edge fields), got vector={vector!r}")
 
 
 def as_mesh_batch(batch):

@@ -35,10 +35,10 @@ from ..layers import ComplexLinear, LearnedDiffusion, adjoint_on_basis
 from ..layers.gradient import _gradient_features
 from ..layers.pointwise import _complex_linear
 from .common import (
-    VECTORS,
     as_mesh_batch,
     check_batch,
     check_options,
+    check_vector_options,
     diffuse_vertices,
     mesh_slices,
     mini_mlp,
@@ -68,6 +68,10 @@ class EdgeFieldBlock(nn.Module):
     carry : bool
         Mix the fields of the previous blocks into this block's fields (``c_prev A``); off
         for the first block, which has none.
+    fields : {"smooth", "local"}
+        With ``vector="edge"``: the block's fields diffused by ``L_c`` in its truncated
+        eigenbasis (``"smooth"``), or the gradients ``M_z^{-1} G (xd W)`` (plus the carried
+        fields) on every edge as they are (``"local"``: no eigenpair of ``L_c`` needed).
 
     Forward
     -------
@@ -84,11 +88,11 @@ class EdgeFieldBlock(nn.Module):
         dropout: float = 0.5,
         vector: str = "edge",
         carry: bool = True,
+        fields: str = "smooth",
     ):
         super().__init__()
-        if vector not in VECTORS:
-            raise ValueError(f"vector must be one of {VECTORS}, got {vector!r}")
-        self.vector, self.vector_width = vector, vector_width
+        check_vector_options(vector, fields)
+        self.vector, self.vector_width, self.fields = vector, vector_width, fields
         self.diffusion = LearnedDiffusion(width, positivity="clamp", init_times=0.0)
         extra = 0
         if vector != "none":
@@ -99,7 +103,7 @@ class EdgeFieldBlock(nn.Module):
             )
             extra = vector_width
         self.field_diffusion: LearnedDiffusion | None = None
-        if vector == "edge":
+        if vector == "edge" and fields == "smooth":
             self.field_diffusion = LearnedDiffusion(vector_width, positivity="clamp", init_times=0.0)
         self.mlp = mini_mlp([2 * width + extra, *mlp, width], dropout)
 
@@ -108,17 +112,20 @@ class EdgeFieldBlock(nn.Module):
         return torch.view_as_complex(self.lift(xd).unflatten(1, (self.vector_width, 2)).contiguous())
 
     def forward(self, x, z, batch):
-        if self.vector == "edge":
+        if self.field_diffusion is not None:
             c = None if z is None or self.mix is None else project(z, batch)
             x, _, u = self.forward_spectral(x, c, batch)
             return x, u if z is None else z + u
         xd = diffuse_vertices(self.diffusion, x, batch)
         feats = [x, xd]
-        if self.vector == "vertex":
-            u = _gradient_features(self._lifted(xd), batch.vertex_gradient)
+        if self.vector != "none":
+            if self.vector == "edge":  # local fields: M_z^-1 G a on every edge
+                u = _gradient_features(self._lifted(xd), batch.gradient, batch.edge_mass)
+            else:
+                u = _gradient_features(self._lifted(xd), batch.vertex_gradient)
             if z is not None and self.mix is not None:
                 u = u + _complex_linear(z, self.mix.weight)
-            feats.append(vertex_invariants(u, self.products, batch, "vertex"))
+            feats.append(vertex_invariants(u, self.products, batch, self.vector))
             z = u if z is None else z + u
         return x + self.mlp(torch.cat(feats, dim=1)), z
 
@@ -143,7 +150,10 @@ class EdgeFieldBlock(nn.Module):
         block's fields and the fields ``Phi c_new`` ``(E, C_v)``.
         """
         if self.field_diffusion is None:
-            raise ValueError(f"forward_spectral needs vector='edge', got vector={self.vector!r}")
+            raise ValueError(
+                f"forward_spectral needs vector='edge' and fields='smooth', got "
+                f"vector={self.vector!r}, fields={self.fields!r}"
+            )
         xd = diffuse_vertices(self.diffusion, x, batch)
         a = self._lifted(xd)
         basis = adjoint_on_basis(batch.gradient, batch.edge_evecs).to(a.dtype)  # (V, k): G^H Phi
@@ -161,7 +171,8 @@ class EdgeFieldNet(nn.Module):
     """The edge-field network (see the module docstring): the recommended network.
 
     Needs in the batch the eigenpairs of a vertex Laplacian and, with ``vector="edge"``,
-    those of ``L_c`` and the gradient ``G`` (:func:`compute_operators`; with
+    the gradient ``G`` and (with ``fields="smooth"``) the eigenpairs of ``L_c``
+    (:func:`compute_operators`; with ``fields="local"`` ``k_edge=0`` spares them; with
     ``vector="vertex"`` the vertex gradient, ``vertex_gradient=True``). Positive features
     whose scales span orders of magnitude, such as heat kernel signatures, are best given
     as their logarithm (``heat_kernel_signature(..., log=True)``).
@@ -182,6 +193,12 @@ class EdgeFieldNet(nn.Module):
         The vector stream: edge fields with ``G`` and ``L_c`` (default); DiffusionNet's
         vertex gradients in their place; none (scalars only). The last two are the
         ablations a study of the edge fields needs.
+    fields : {"smooth", "local"}
+        With ``vector="edge"``: each block's fields diffused by ``L_c`` in its truncated
+        eigenbasis, a learned time per channel (``"smooth"``, the default), or the
+        gradients ``M_z^{-1} G`` of the block's mixed scalars on every edge as they are
+        (``"local"``): every feature of the vector stream then depends on a neighbourhood
+        of the edge, where the eigenbasis keeps only the lowest modes of ``L_c``.
 
     Forward
     -------
@@ -201,21 +218,22 @@ class EdgeFieldNet(nn.Module):
         dropout: float = 0.5,
         head: str = "global",
         vector: str = "edge",
+        fields: str = "smooth",
     ):
         super().__init__()
         check_options(in_channels, out_channels, width, num_blocks, head, dropout)
-        if vector not in VECTORS:
-            raise ValueError(f"vector must be one of {VECTORS}, got {vector!r}")
+        check_vector_options(vector, fields)
         if not isinstance(vector_width, int) or isinstance(vector_width, bool) or vector_width < 1:
             raise ValueError(f"vector_width must be a positive integer, got {vector_width!r}")
-        self.in_channels, self.head, self.vector = in_channels, head, vector
+        self.in_channels, self.head, self.vector, self.fields = in_channels, head, vector, fields
         self.first = nn.Linear(in_channels, width)
         self.blocks = nn.ModuleList(
-            EdgeFieldBlock(width, vector_width, mlp, dropout, vector, carry=i > 0) for i in range(num_blocks)
+            EdgeFieldBlock(width, vector_width, mlp, dropout, vector, carry=i > 0, fields=fields)
+            for i in range(num_blocks)
         )
         self.last = nn.Linear(width, out_channels)
         self._needs = {
-            "edge": ("gradient", "edge_evecs", "edge_evals", "edge_mass"),
+            "edge": ("gradient", "edge_mass") + (("edge_evecs", "edge_evals") if fields == "smooth" else ()),
             "vertex": ("vertex_gradient",),
             "none": (),
         }[vector]
@@ -223,8 +241,13 @@ class EdgeFieldNet(nn.Module):
     def forward(self, batch):
         batch = as_mesh_batch(batch)
         check_batch(self, batch, self.in_channels, ("vertex_evecs", "vertex_evals", *self._needs))
+        if self.vector == "edge" and self.fields == "smooth" and batch.edge_evecs.shape[-1] == 0:
+            raise ValueError(
+                "fields='smooth' needs the eigenpairs of L_c, and the batch holds none "
+                "(compute_operators(k_edge=0)): compute them (k_edge >= 1) or use fields='local'"
+            )
         x = self.first(batch.features)
-        if self.vector == "edge":
+        if self.vector == "edge" and self.fields == "smooth":
             c = None  # the fields as coefficients in the edge eigenbasis
             for block in self.blocks:
                 x, new, _ = block.forward_spectral(x, c, batch)
