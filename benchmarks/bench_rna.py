@@ -10,12 +10,14 @@ the file's resolution:
 
 * precompute: :func:`torch_edgevf.learning.precompute.compute_operators` as the experiment
   calls it (128 eigenpairs of the vertex Laplacian, 32 of ``L_c``, ``G``, the vertex
-  gradient), against DiffusionNet's operator precompute reimplemented step by step in
-  ``bench_peers.diffusionnet_reference`` (robust Laplacian, 128 eigenpairs by SciPy's
-  shift-invert ARPACK, least-squares vertex gradient); median of ``--repeats``, the two
-  sides interleaved;
+  gradient), and what the edge network with local fields needs (``k_edge=0``: the 128
+  vertex eigenpairs and ``G``), against DiffusionNet's operator precompute reimplemented
+  step by step in ``bench_peers.diffusionnet_reference`` (robust Laplacian, 128 eigenpairs
+  by SciPy's shift-invert ARPACK, least-squares vertex gradient); median of ``--repeats``,
+  the sides interleaved;
 * a training step (forward, backward, Adam; per-vertex head, 260 classes, width 128, 4
-  blocks) of the edge-field network and of DiffusionNet on the same mesh and operators.
+  blocks) of the edge-field network (smooth fields, the default, and local fields) and of
+  DiffusionNet on the same mesh and operators.
 
 Times are process CPU times (one thread: the work itself, not the turns of other processes
 on a loaded machine, which the wall time would count). Ratios are ours / DiffusionNet
@@ -50,6 +52,8 @@ from torch_edgevf.learning.precompute import compute_operators, heat_kernel_sign
 from common import machine_info, markdown_table  # noqa: E402
 
 OPTIONS = dict(k_edge=32, k_vertex=128, vertex_gradient=True)
+#: what EdgeFieldNet(fields="local") needs: no eigenpair of L_c, no vertex gradient
+LOCAL = dict(k_edge=0, k_vertex=128, vertex_gradient=False)
 
 
 def step_seconds(model, batch, steps: int) -> float:
@@ -65,11 +69,14 @@ def step_seconds(model, batch, steps: int) -> float:
 
 
 def measure(mesh, repeats: int, steps: int) -> dict:
-    ours, peer = [], []
+    ours, local, peer = [], [], []
     for _ in range(repeats):
         start = time.process_time()
         ops = compute_operators(mesh.verts, mesh.faces, **OPTIONS)
         ours.append(time.process_time() - start)
+        start = time.process_time()
+        compute_operators(mesh.verts, mesh.faces, **LOCAL)
+        local.append(time.process_time() - start)
         start = time.process_time()
         bench_peers.diffusionnet_reference(mesh.verts, mesh.faces)
         peer.append(time.process_time() - start)
@@ -79,14 +86,16 @@ def measure(mesh, repeats: int, steps: int) -> dict:
     )
     batch = collate_meshes([MeshSample(o32, feats, torch.from_numpy(mesh.mesh_labels))])
     step = {}
-    for name in ("edgefieldnet", "diffusionnet"):
+    for name in ("edgefieldnet", "edgefieldnet-local", "diffusionnet"):
         torch.manual_seed(0)
         step[name] = step_seconds(rna_run.build_model(name, 16, 128), batch, steps)
     return {
         "vertices": len(mesh.verts),
         "ours": statistics.median(ours),
+        "local": statistics.median(local),
         "peer": statistics.median(peer),
         "step_ours": step["edgefieldnet"],
+        "step_local": step["edgefieldnet-local"],
         "step_peer": step["diffusionnet"],
     }
 
@@ -114,12 +123,16 @@ def main(argv=None) -> int:
                     name,
                     label,
                     f"{r['vertices']:,}",
-                    f"{r['ours']:.2f}",
                     f"{r['peer']:.2f}",
+                    f"{r['ours']:.2f}",
                     f"{r['ours'] / r['peer']:.2f}",
-                    f"{r['step_ours']:.3f}",
+                    f"{r['local']:.2f}",
+                    f"{r['local'] / r['peer']:.2f}",
                     f"{r['step_peer']:.3f}",
+                    f"{r['step_ours']:.3f}",
                     f"{r['step_ours'] / r['step_peer']:.2f}",
+                    f"{r['step_local']:.3f}",
+                    f"{r['step_local'] / r['step_peer']:.2f}",
                 ]
             )
             print(" | ".join(rows[-1]), file=sys.stderr, flush=True)
@@ -130,11 +143,15 @@ def main(argv=None) -> int:
                 "mesh",
                 "resolution",
                 "vertices",
-                "precompute (s)",
-                "DiffusionNet's (s)",
+                "DiffusionNet precompute (s)",
+                "ours (s)",
                 "ratio",
-                "step (s)",
-                "DiffusionNet's (s)",
+                "ours, local fields (s)",
+                "ratio",
+                "DiffusionNet step (s)",
+                "ours (s)",
+                "ratio",
+                "ours, local fields (s)",
                 "ratio",
             ],
             rows,

@@ -308,6 +308,21 @@ def test_cache_roundtrip_without_pickle(cache_setup, monkeypatch):
     assert cache.path(cache.key(v, f, k_edge=5, k_vertex=3)) != files[0]
 
 
+def test_cache_keeps_operators_without_edge_eigenpairs(cache_setup, monkeypatch):
+    """``k_edge=0`` (no eigenpair of ``L_c``, for local edge fields): the empty eigenpairs
+    are written and read back with their shapes, under a key of their own."""
+    v, f, cache, _ = cache_setup
+    first = cache.get(v, f, k_edge=0, k_vertex=3)
+    assert first.edge_evecs.shape == (first.edges.shape[0], 0) and first.edge_evals.shape == (0,)
+    monkeypatch.setattr(cache_module, "compute_operators", None)  # a recomputation would fail
+    again = cache.get(v, f, k_edge=0, k_vertex=3)
+    _equal(again, first)
+    assert again.edge_evecs.dtype == torch.complex128
+    assert cache.path(cache.key(v, f, k_edge=0, k_vertex=3)) != cache.path(
+        cache.key(v, f, k_edge=4, k_vertex=3)
+    )
+
+
 def _rebuilt(cache, v, f, options, caplog):
     calls = []
     real = compute_operators
