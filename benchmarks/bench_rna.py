@@ -10,14 +10,15 @@ the file's resolution:
 
 * precompute: :func:`torch_edgevf.learning.precompute.compute_operators` as the experiment
   calls it (128 eigenpairs of the vertex Laplacian, 32 of ``L_c``, ``G``, the vertex
-  gradient), and what the edge network with local fields needs (``k_edge=0``: the 128
+  gradient: what every network of the study needs, smooth fields included), and what the
+  edge network with local fields needs (``k_edge=0``: the 128
   vertex eigenpairs and ``G``), against DiffusionNet's operator precompute reimplemented
   step by step in ``bench_peers.diffusionnet_reference`` (robust Laplacian, 128 eigenpairs
   by SciPy's shift-invert ARPACK, least-squares vertex gradient); median of ``--repeats``,
   the sides interleaved;
 * a training step (forward, backward, Adam; per-vertex head, 260 classes, width 128, 4
-  blocks) of the edge-field network (smooth fields, the default, and local fields) and of
-  DiffusionNet on the same mesh and operators.
+  blocks) of the edge-field network (local fields, its default per vertex, and smooth
+  fields) and of DiffusionNet on the same mesh and operators.
 
 Times are process CPU times (one thread: the work itself, not the turns of other processes
 on a loaded machine, which the wall time would count). Ratios are ours / DiffusionNet
@@ -86,7 +87,7 @@ def measure(mesh, repeats: int, steps: int) -> dict:
     )
     batch = collate_meshes([MeshSample(o32, feats, torch.from_numpy(mesh.mesh_labels))])
     step = {}
-    for name in ("edgefieldnet", "edgefieldnet-local", "diffusionnet"):
+    for name in ("edgefieldnet-smooth", "edgefieldnet", "diffusionnet"):
         torch.manual_seed(0)
         step[name] = step_seconds(rna_run.build_model(name, 16, 128), batch, steps)
     return {
@@ -94,8 +95,8 @@ def measure(mesh, repeats: int, steps: int) -> dict:
         "ours": statistics.median(ours),
         "local": statistics.median(local),
         "peer": statistics.median(peer),
-        "step_ours": step["edgefieldnet"],
-        "step_local": step["edgefieldnet-local"],
+        "step_ours": step["edgefieldnet-smooth"],
+        "step_local": step["edgefieldnet"],
         "step_peer": step["diffusionnet"],
     }
 
@@ -144,12 +145,12 @@ def main(argv=None) -> int:
                 "resolution",
                 "vertices",
                 "DiffusionNet precompute (s)",
-                "ours (s)",
+                "ours, smooth fields (s)",
                 "ratio",
                 "ours, local fields (s)",
                 "ratio",
                 "DiffusionNet step (s)",
-                "ours (s)",
+                "ours, smooth fields (s)",
                 "ratio",
                 "ours, local fields (s)",
                 "ratio",

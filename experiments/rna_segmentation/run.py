@@ -38,17 +38,18 @@ HERE = Path(__file__).resolve().parent
 #: the operator cache of the study's commands: $TORCH_EDGEVF_CACHE, else ~/.cache/torch_edgevf/rna
 DEFAULT_CACHE = os.environ.get("TORCH_EDGEVF_CACHE", str(Path.home() / ".cache" / "torch_edgevf" / "rna"))
 
-#: the networks, by name: the recommended edge-field network, the faithful DiffusionNet, and
-#: the edge network's ablations (no vector stream; vertex gradients in place of G; the divergence
-#: and curl of the fields added to the MLPs; the fields local, not diffused in the truncated
-#: L_c eigenbasis: the last two are the PSB study's variants)
+#: the networks, by name: the recommended edge-field network (the library's EdgeFieldNet with
+#: its defaults for a per-vertex head: local edge fields), the faithful DiffusionNet, and the
+#: edge network's ablations (smooth fields, the default for one output per mesh; no vector
+#: stream; vertex gradients in place of G; smooth fields with their divergence and curl added
+#: to the MLPs, the PSB study's variant)
 MODELS = (
     "edgefieldnet",
     "diffusionnet",
+    "edgefieldnet-smooth",
     "edgefieldnet-scalar",
     "edgefieldnet-vertexvec",
     "edgefieldnet-divcurl",
-    "edgefieldnet-local",
 )
 DEFAULT_MODELS = ("edgefieldnet", "diffusionnet")
 
@@ -70,14 +71,13 @@ def build_model(name: str, in_channels: int, width: int) -> torch.nn.Module:
 
         # the divergence and curl of the fields in the MLPs as well
         return StudyEdgeFieldNet(in_channels, RNA_CLASSES, vector_width=width // 4, divergence=True, **common)
-    # local: the fields M_z^-1 G (xd W) on the edges as they are (no L_c diffusion, no eigenbasis;
-    # the same numbers, parameters and initialisation as the PSB study's variant of that name
-    # without divergence and curl, with which its first runs were made)
+    # edgefieldnet: the library's defaults, local fields M_z^-1 G (xd W) on every edge (no L_c
+    # diffusion, no eigenbasis); smooth: the fields diffused in the truncated L_c eigenbasis
     vector, fields = {
-        "edgefieldnet": ("edge", "smooth"),
-        "edgefieldnet-local": ("edge", "local"),
-        "edgefieldnet-scalar": ("none", "smooth"),
-        "edgefieldnet-vertexvec": ("vertex", "smooth"),
+        "edgefieldnet": ("edge", None),
+        "edgefieldnet-smooth": ("edge", "smooth"),
+        "edgefieldnet-scalar": ("none", None),
+        "edgefieldnet-vertexvec": ("vertex", None),
     }[name]
     return EdgeFieldNet(
         in_channels, RNA_CLASSES, vector_width=width // 4, vector=vector, fields=fields, **common

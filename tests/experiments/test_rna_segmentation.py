@@ -172,10 +172,11 @@ def test_every_model_gives_every_vertex_a_score_of_every_class():
         assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters()), name
 
 
-def test_the_local_fields_network_is_the_one_its_first_runs_trained():
-    """``edgefieldnet-local`` is the library's ``EdgeFieldNet(fields="local")``; its seed-0 run
-    trained the PSB study's variant without diffusion of the fields and without divergence and
-    curl: the same parameters, drawn alike from a seed, give the same logits."""
+def test_the_recommended_network_is_the_one_its_first_run_trained():
+    """``edgefieldnet`` is the library's ``EdgeFieldNet`` with its per-vertex defaults (local
+    fields); its seed-0 run trained the PSB study's variant without diffusion of the fields
+    and without divergence and curl: the same parameters, drawn alike from a seed, give the
+    same logits."""
     import torch
 
     import torch_edgevf as ev
@@ -188,7 +189,7 @@ def test_the_local_fields_network_is_the_one_its_first_runs_trained():
     x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16, log=True)
     batch = collate_meshes([MeshSample(ops, x, 0)])
     torch.manual_seed(0)
-    library = rna_run.build_model("edgefieldnet-local", 16, 16).double().eval()
+    library = rna_run.build_model("edgefieldnet", 16, 16).double().eval()
     assert library.fields == "local"
     torch.manual_seed(0)
     study = variants.StudyEdgeFieldNet(

@@ -49,7 +49,7 @@ def _small_edge_net(**options):
 
 
 NETWORKS = {
-    "edge": _small_edge_net(),
+    "edge": _small_edge_net(fields="smooth"),
     "edge-local": _small_edge_net(fields="local"),
     "edge-vertex": _small_edge_net(vector="vertex"),
     "edge-none": _small_edge_net(vector="none"),
@@ -62,10 +62,24 @@ def test_the_default_network_is_the_recommended_one():
     fields, dropout 0.5, one output per mesh; with the 16 scales of the heat kernel
     signature and 19 classes, 64,067 parameters (the study's count)."""
     net = models.EdgeFieldNet(16, 19)
-    assert (net.vector, net.head, len(net.blocks)) == ("edge", "global", 3)
+    assert (net.vector, net.head, net.fields, len(net.blocks)) == ("edge", "global", "smooth", 3)
     assert sum(p.numel() for p in net.parameters()) == 64_067
     assert sum(p.numel() for p in models.DiffusionNet(16, 19).parameters()) == 118_035
     assert [m.p for m in net.modules() if isinstance(m, torch.nn.Dropout)] == [0.5] * 6
+
+
+@pytest.mark.parametrize("head", ["vertex", "face"])
+def test_the_default_per_vertex_and_face_network_has_local_fields(mesh, head):
+    """Per vertex or face (segmentation) the recommended network's fields are local (the RNA
+    study's result): no eigenpair of ``L_c`` is needed, and none is learned a time for."""
+    net = models.EdgeFieldNet(8, 5, width=8, vector_width=4, num_blocks=2, head=head)
+    assert net.fields == "local" and all(b.field_diffusion is None for b in net.blocks)
+    assert models.EdgeFieldNet(8, 5, head=head, vector="vertex").fields == "smooth"  # unused there
+    v, f = mesh
+    ops = precompute.compute_operators(v, f, k_edge=0, k_vertex=16)
+    x = precompute.heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=8, log=True)
+    out = net.double()(batching.collate_meshes([batching.MeshSample(ops, x, 0)]))
+    assert out.shape == ((v if head == "vertex" else f).shape[0], 5)
 
 
 @pytest.mark.parametrize("name", sorted(NETWORKS))

@@ -5,25 +5,29 @@ divergence::
 
     x (V, C) --linear--> x
     block:  xd = diffuse_L(x)                    learned time per channel, vertex Laplacian
-            c  = Phi^H G (xd W) [+ c_prev A]     gradients and co-gradients of mixed scalars,
-                                                 as coefficients in the L_c eigenbasis Phi
-            c  = diag(exp(-lambda t)) c          learned L_c heat diffusion of the fields
-            x  = x + MLP(x, xd, pool_v tanh Re(u conj(u A)))     u = Phi c, the fields
-            c_prev = c_prev + c
+            u  = M_z^-1 G (xd W) [+ u_prev A]    gradients and co-gradients of mixed scalars
+            u  = exp(-t L_c) u                   smooth fields: learned L_c heat diffusion
+                                                 in a truncated eigenbasis (local: none)
+            x  = x + MLP(x, xd, pool_v tanh Re(u conj(u A)))
+            u_prev = u_prev + u
     logits: a linear layer per vertex, then the mass-weighted mean over each mesh
             (head="global"), or per vertex / per face
 
-The fields of the vector stream are outputs of the ``L_c`` diffusion in a truncated
-eigenbasis, so they lie in its span: the network carries their coefficients ``c``, and
-``Phi^H G`` is ``(G^H Phi)^H``, computed once per mesh
-(:func:`~torch_edgevf.learning.layers.adjoint_on_basis`). The invariant products
-``Re(u conj(u A))`` read the fields in a frame-free way; every layer is gauge equivariant
-and its operators intrinsic, so with intrinsic input features the outputs are invariant to
-rigid motions and to the numbering of the vertices.
+Smooth fields (``fields="smooth"``, the default for one output per mesh) are outputs of
+the ``L_c`` diffusion in a truncated eigenbasis ``Phi``, so they lie in its span: the
+network carries their coefficients ``c`` (``u = Phi c``), and ``Phi^H G`` is
+``(G^H Phi)^H``, computed once per mesh
+(:func:`~torch_edgevf.learning.layers.adjoint_on_basis`). Local fields (``fields="local"``,
+the default per vertex and per face) are the gradients on every edge, not diffused: the
+boundaries of a segmentation are local, and the lowest modes of ``L_c`` cannot hold them.
+The invariant products ``Re(u conj(u A))`` read the fields in a frame-free way; every
+layer is gauge equivariant and its operators intrinsic, so with intrinsic input features
+the outputs are invariant to rigid motions and to the numbering of the vertices.
 
-This is the network recommended by the PSB classification study (the repository's
-``experiments/psb_classification``): its input there is the logarithm of the heat kernel
-signature (``heat_kernel_signature(..., log=True)``).
+These are the networks recommended by the repository's studies: PSB classification
+(``experiments/psb_classification``, one output per mesh) and RNA segmentation
+(``experiments/rna_segmentation``, per vertex); their input there is the logarithm of the
+heat kernel signature (``heat_kernel_signature(..., log=True)``).
 """
 
 from __future__ import annotations
@@ -193,12 +197,15 @@ class EdgeFieldNet(nn.Module):
         The vector stream: edge fields with ``G`` and ``L_c`` (default); DiffusionNet's
         vertex gradients in their place; none (scalars only). The last two are the
         ablations a study of the edge fields needs.
-    fields : {"smooth", "local"}
+    fields : {"smooth", "local"} or None
         With ``vector="edge"``: each block's fields diffused by ``L_c`` in its truncated
-        eigenbasis, a learned time per channel (``"smooth"``, the default), or the
-        gradients ``M_z^{-1} G`` of the block's mixed scalars on every edge as they are
+        eigenbasis, a learned time per channel (``"smooth"``), or the gradients
+        ``M_z^{-1} G`` of the block's mixed scalars on every edge as they are
         (``"local"``): every feature of the vector stream then depends on a neighbourhood
-        of the edge, where the eigenbasis keeps only the lowest modes of ``L_c``.
+        of the edge, where the eigenbasis keeps only the lowest modes of ``L_c``. The
+        default (None) is the recommended one for the head: ``"smooth"`` for one output per
+        mesh (``head="global"``, shape classification), ``"local"`` per vertex or face
+        (segmentation); with ``vector`` other than ``"edge"``, ``"smooth"`` (unused).
 
     Forward
     -------
@@ -218,10 +225,12 @@ class EdgeFieldNet(nn.Module):
         dropout: float = 0.5,
         head: str = "global",
         vector: str = "edge",
-        fields: str = "smooth",
+        fields: str | None = None,
     ):
         super().__init__()
         check_options(in_channels, out_channels, width, num_blocks, head, dropout)
+        if fields is None:
+            fields = "local" if vector == "edge" and head != "global" else "smooth"
         check_vector_options(vector, fields)
         if not isinstance(vector_width, int) or isinstance(vector_width, bool) or vector_width < 1:
             raise ValueError(f"vector_width must be a positive integer, got {vector_width!r}")
