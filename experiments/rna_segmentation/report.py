@@ -66,12 +66,12 @@ def table(rows: list[dict], split: str, models: tuple[str, ...]) -> str:
 def validation_table(rows: list[dict]) -> str:
     """The configuration check: one seed, 6 epochs on 100 training meshes, scored on 40 others."""
     lines = [
-        "| network | inputs | accuracy (%) | mIoU (%) | final training accuracy (%) |",
-        "|---|---|---:|---:|---:|",
+        "| network | inputs | seed | accuracy (%) | mIoU (%) | final training accuracy (%) |",
+        "|---|---|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
-            f"| {NAMES.get(r['model'], r['model'])} | {r['inputs']} | {100 * r['test_accuracy']:.1f} "
+            f"| {NAMES.get(r['model'], r['model'])} | {r['inputs']} | {r['seed']} | {100 * r['test_accuracy']:.1f} "
             f"| {100 * r['test_miou']:.1f} | {100 * r['train_accuracy']:.1f} |"
         )
     return "\n".join(lines)
