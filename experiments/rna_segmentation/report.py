@@ -71,8 +71,9 @@ def validation_table(rows: list[dict]) -> str:
     ]
     for r in rows:
         lines.append(
-            f"| {NAMES.get(r['model'], r['model'])} | {r['inputs']} | {r['seed']} | {100 * r['test_accuracy']:.1f} "
-            f"| {100 * r['test_miou']:.1f} | {100 * r['train_accuracy']:.1f} |"
+            f"| {NAMES.get(r['model'], r['model'])} | {r['inputs']} | {r['seed']} "
+            f"| {100 * r['test_accuracy']:.1f} | {100 * r['test_miou']:.1f} "
+            f"| {100 * r['train_accuracy']:.1f} |"
         )
     return "\n".join(lines)
 
