@@ -172,6 +172,19 @@ def test_pyg_batches_of_every_size_and_order():
     torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
 
 
+def test_pyg_batches_without_edge_eigenpairs_feed_the_per_vertex_network():
+    """``ComputeOperators(k_edge=0)``: no eigenpair of ``L_c`` (empty columns), batched by PyG
+    as by ``collate_meshes``; the per-vertex network (local fields) runs on it."""
+    items = data_list(ComputeOperators(**dict(OPTIONS, k_edge=0)))
+    assert items[0].edge_evecs.shape == (items[0].edge_mass.shape[0], 0)
+    batch = next(iter(DataLoader(items, batch_size=2)))
+    assert batch.edge_evecs.shape == (sum(d.edge_mass.shape[0] for d in items), 0)
+    torch.manual_seed(1)
+    model = EdgeFieldNet(items[0].x.shape[1], 2, width=8, num_blocks=2, head="vertex").double().eval()
+    assert model.fields == "local"
+    torch.testing.assert_close(model(batch), torch.cat([model(d) for d in items]), rtol=1e-10, atol=1e-12)
+
+
 def test_pyg_in_memory_dataset_and_to_data_list_give_the_meshes_back():
     """PyG stores a dataset as one Data (concatenated, not offset) and separates it again, and a
     batch gives its meshes back: the operators survive both."""
