@@ -103,7 +103,8 @@ def test_outputs_are_invariant_to_rigid_motion_and_renumbering(mesh, name, head)
 def _block_on_the_edges(block, x, z, batch):
     """The block as its formula reads, every field on the edges and every function the
     public, checked one of :mod:`torch_edgevf.learning.layers` (a reference for the
-    eigenbasis path of :meth:`EdgeFieldBlock.forward`)."""
+    eigenbasis path of :meth:`EdgeFieldBlock.forward`, and for local fields, which skip
+    the ``L_c`` diffusion)."""
     t = block.diffusion.times
     xd = layers.spectral_diffusion(
         x, batch.vertex_evals, batch.vertex_evecs, batch.vertex_mass, t, batch.vertex_offsets
@@ -112,13 +113,14 @@ def _block_on_the_edges(block, x, z, batch):
     u = layers.gradient_features(a, batch.gradient, batch.edge_mass)
     if z is not None and block.mix is not None:
         u = u + block.mix(z)
-    s = block.field_diffusion.times
-    ud = layers.spectral_diffusion(
-        u, batch.edge_evals, batch.edge_evecs, batch.edge_mass, s, batch.edge_offsets
-    )
-    inv = torch.tanh(layers.invariant_features(ud, block.products, modulus=False))
+    if block.field_diffusion is not None:
+        s = block.field_diffusion.times
+        u = layers.spectral_diffusion(
+            u, batch.edge_evals, batch.edge_evecs, batch.edge_mass, s, batch.edge_offsets
+        )
+    inv = torch.tanh(layers.invariant_features(u, block.products, modulus=False))
     inv = layers.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
-    return x + block.mlp(torch.cat([x, xd, inv], dim=1)), ud if z is None else z + ud
+    return x + block.mlp(torch.cat([x, xd, inv], dim=1)), u if z is None else z + u
 
 
 @pytest.mark.parametrize("carry", [False, True])
@@ -148,20 +150,6 @@ def test_the_fields_as_eigenbasis_coefficients_are_the_fields_on_the_edges(mesh,
         torch.testing.assert_close(g, w, rtol=1e-9, atol=1e-12)
 
 
-def _local_block_on_the_edges(block, x, z, batch):
-    """The block with local fields as its formula reads, with the public layers: the
-    gradients ``M_z^-1 G (xd W)`` plus the carried fields, no diffusion of the fields."""
-    t = block.diffusion.times
-    xd = layers.spectral_diffusion(
-        x, batch.vertex_evals, batch.vertex_evecs, batch.vertex_mass, t, batch.vertex_offsets
-    )
-    a = torch.view_as_complex(block.lift(xd).unflatten(1, (block.vector_width, 2)).contiguous())
-    u = layers.gradient_features(a, batch.gradient, batch.edge_mass) + block.mix(z)
-    inv = torch.tanh(layers.invariant_features(u, block.products, modulus=False))
-    inv = layers.pool_edges_to_vertices(inv, batch.edges, batch.num_vertices, batch.edge_mass)
-    return x + block.mlp(torch.cat([x, xd, inv], dim=1)), z + u
-
-
 def test_local_fields_are_the_gradients_on_the_edges(mesh):
     """``fields="local"``: the block's fields are ``M_z^-1 G (xd W)`` (plus the carried ones)
     on every edge, the same numbers as the formula with the public layers, on a batch of two
@@ -181,7 +169,7 @@ def test_local_fields_are_the_gradients_on_the_edges(mesh):
         block.diffusion.raw_times.uniform_(0.0, 0.05)
     x = torch.randn(pair.num_vertices, 8, dtype=torch.float64)
     z = torch.randn(pair.num_edges, 4, dtype=torch.complex128)
-    got, want = block(x, z, pair), _local_block_on_the_edges(block, x, z, pair)
+    got, want = block(x, z, pair), _block_on_the_edges(block, x, z, pair)
     for g, w in zip(got, want):
         assert w.abs().max() > 1e-3
         torch.testing.assert_close(g, w, rtol=1e-12, atol=1e-12)

@@ -250,13 +250,14 @@ class EdgeFieldNet(nn.Module):
     def forward(self, batch):
         batch = as_mesh_batch(batch)
         check_batch(self, batch, self.in_channels, ("vertex_evecs", "vertex_evals", *self._needs))
-        if self.vector == "edge" and self.fields == "smooth" and batch.edge_evecs.shape[-1] == 0:
+        smooth = self.vector == "edge" and self.fields == "smooth"  # fields in the L_c eigenbasis
+        if smooth and batch.edge_evecs.shape[-1] == 0:
             raise ValueError(
                 "fields='smooth' needs the eigenpairs of L_c, and the batch holds none "
                 "(compute_operators(k_edge=0)): compute them (k_edge >= 1) or use fields='local'"
             )
         x = self.first(batch.features)
-        if self.vector == "edge" and self.fields == "smooth":
+        if smooth:
             c = None  # the fields as coefficients in the edge eigenbasis
             for block in self.blocks:
                 x, new, _ = block.forward_spectral(x, c, batch)
