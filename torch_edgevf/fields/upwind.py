@@ -92,7 +92,7 @@ try:  # the CSR kernel that accumulates into its output (SciPy's own, used by cs
 except ImportError:  # pragma: no cover - a SciPy without it: plain products
     _csr_matvec = None
 
-from ..mesh.geometry import pair_transport
+from ..mesh.geometry import int_power, pair_transport
 from ..operators.kernels import covariant_from, mass_values, prepare
 
 __all__ = ["UpwindOperator", "upwind_parts"]
@@ -162,7 +162,7 @@ def upwind_parts(verts, topo, w: torch.Tensor, n: int = 1) -> tuple[torch.Tensor
     ne = topo.num_edges
     fe = topo.face_edges.to(dev)
     r1 = pair_transport(geom, signs, 1)
-    rn = r1 if n == 1 else pair_transport(geom, signs, n)
+    rn = r1 if n == 1 else int_power(r1, n)  # (sigma e^{i alpha})^n: what pair_transport(.., n) gives
     D = covariant_from(geom, signs, topo, w, n, transports=(r1, rn)).coalesce()
     rows, cols, vals = [D.indices()[0]], [D.indices()[1]], [D.values()]
     cdtype = D.values().dtype
