@@ -402,6 +402,47 @@ def test_untangle_repairs_a_folded_grid():
     assert _flips(np.stack([W[:ncls][fl], W[ncls:][fl]], -1)) == 0
 
 
+def _folding_below(monkeypatch, threshold):
+    """``quad_mesh`` with maps that stay folded at scales below ``threshold`` times the first
+    (quads longer than the first's over ``threshold``); returns the list of scales tried."""
+    import dataclasses
+
+    import torch_edgevf.quad.mesh as qm
+
+    real, scales = qm._grid_map64, []
+
+    def fake(verts, topo, z, scale, *args):
+        scales.append(scale)
+        grid = real(verts, topo, z, scale, *args)
+        return dataclasses.replace(grid, flipped=5) if scale < threshold * scales[0] else grid
+
+    monkeypatch.setattr(qm, "_grid_map64", fake)
+    return scales
+
+
+def test_the_default_size_falls_back_to_finer_grids(monkeypatch, small):
+    v, f = small
+    mean = float((v[f[:, [1, 2, 0]]] - v[f]).norm(dim=-1).mean())
+    scales = _folding_below(monkeypatch, 1.5)
+    with pytest.warns(UserWarning, match="the quads are 0.5 times as long as the input's mean edge"):
+        q = quad_mesh(v, f, field="smoothest")
+    assert [round(s / scales[0], 6) for s in scales] == [1.0, 1.1, 0.9, 1.2, round(1 / 0.7, 6), 2.0]
+    assert quad_mesh_report(q.verts, q.quads).closed
+    # the quads are about half as long as the input's edges
+    e = q.verts[torch.from_numpy(np.stack([q.quads.numpy(), np.roll(q.quads.numpy(), -1, 1)], -1))]
+    assert 0.4 * mean < float((e[..., 0, :] - e[..., 1, :]).norm(dim=-1).mean()) < 0.6 * mean
+    # a size the user asked for is not changed beyond the near retries
+    scales = _folding_below(monkeypatch, 1.5)
+    with pytest.raises(ValueError, match=r"5 at scale x1\.2\): no quad mesh"):
+        quad_mesh(v, f, field="smoothest", edge_length=0.3)
+    assert len(scales) == 4
+    # no retries: one scale only
+    scales = _folding_below(monkeypatch, 1.5)
+    with pytest.raises(ValueError, match="keeps folded triangles"):
+        quad_mesh(v, f, field="smoothest", retries=0)
+    assert len(scales) == 1
+
+
 def test_untangle_leaves_a_flip_it_cannot_move():
     # a flipped triangle whose corners are all held at integers (no free unknown near it):
     # the map comes back unchanged (quad_mesh then retries at another scale or refuses)

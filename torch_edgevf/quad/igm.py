@@ -301,6 +301,46 @@ def _separation_rows(unk: Unknowns, uv, uv_relaxed, fl, paths):
     return np.vstack(rows) if rows else np.zeros((0, unk.K.shape[1]))
 
 
+def _boundary_rows(unk: Unknowns, uv, uv_relaxed, fl, cone, on_line):
+    """Constraints that keep cones off the boundary lines: for every cone ``a`` and boundary
+    vertex ``c`` of one triangle, ``c`` inside a straight stretch of the boundary
+    (``on_line``: its coordinate across the boundary, the only one of its wedge with no free
+    unknown, is an integer unknown), that the rounded map puts on ``c``'s line (a collapsed
+    triangle), ``W_a - W_c = d`` in that coordinate of the triangle's chart, ``d`` the
+    relaxed offset rounded away from 0 (at least one unit).  The constraint involves the
+    integer unknowns only."""
+    rows = []
+    n = unk.ncls
+    Pd, Qd = unk.P.tocsr(), unk.Q.tocsr()
+    has_free = np.diff(Pd.indptr) > 0
+    has_free[has_free] = np.add.reduceat(np.abs(Pd.data), Pd.indptr[:-1][has_free]) > 0
+    done = set()
+    for f in np.flatnonzero(cone[fl].any(1) & on_line[fl].any(1)).tolist():
+        for ka in range(3):
+            a = int(fl[f, ka])
+            if not cone[a]:
+                continue
+            for kc in range(3):
+                c = int(fl[f, kc])
+                if not on_line[c] or (a, c) in done:
+                    continue
+                w_a, w_c = unk.wedge[f, ka], unk.wedge[f, kc]
+                free = [bool(has_free[j * n + w_c]) for j in (0, 1)]
+                if free[0] == free[1]:
+                    continue
+                j = free.index(False)
+                if abs(uv[f, ka, j] - uv[f, kc, j]) > 0.5:
+                    continue
+                delta = uv_relaxed[f, ka, j] - uv_relaxed[f, kc, j]
+                if abs(delta) < 1e-9:
+                    continue
+                done.add((a, c))
+                d = float(np.sign(delta)) * max(1.0, float(np.rint(abs(delta))))
+                form = Qd[j * n + w_a].toarray() - Qd[j * n + w_c].toarray()
+                rows.append(np.column_stack([form, [[-d]]]))
+    return np.vstack(rows) if rows else np.zeros((0, unk.K.shape[1]))
+
+
 def _round_map(unk: Unknowns, A, rhs, extra_rows):
     """Eliminate, reduce and round; the integers ``y`` (exact) and the relaxed ones."""
     K = np.vstack([unk.K, extra_rows]) if extra_rows.size else unk.K
@@ -338,7 +378,8 @@ def integer_grid_map(
         face singularity raises ``ValueError``
     fix_flips : run the foldover-free iterations when the rounded map flips triangles
     separate_cones : at most this many rounds of re-rounding with close cones that the
-        rounding put at one point held one unit apart
+        rounding put at one point held one unit apart, and cones that it put on the line of
+        a neighbouring straight stretch of a hard boundary held one unit off it
     dipoles : pairs of cones of opposite index closer than this many target quad edges
         (``dipoles / s``) are removed (:func:`torch_edgevf.quad.cones.cancel_dipoles`): the
         quad mesh cannot resolve them; 0 keeps every cone of the field
@@ -442,6 +483,8 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
         uv = corners(red.wedges(y))
         uv_relaxed = corners(red.wedges(y_relaxed))
         new = _separation_rows(unk, uv, uv_relaxed, fl, paths)
+        if boundary is not None:
+            new = np.vstack([new, _boundary_rows(unk, uv, uv_relaxed, fl, cone, bnd_v & ~corner)])
         log.info(
             "igm: %d cones, %d arcs, %d closures, %d separations, %d independent integers, "
             "%d rounding steps, dependent integers off by %.2g; %d cone pairs collapsed",

@@ -21,6 +21,7 @@ the cones: a cone of index ``I`` has valence ``4 - 4 I`` (3 for ``+1/4``, 5 for 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,12 @@ __all__ = ["QuadMesh", "quad_mesh", "quad_mesh_report", "QuadMeshReport", "sharp
 _FIELDS = ("curvature", "smoothest")
 _BOUNDARY = ("hard", "soft")
 _RETRY_SCALES = (1.0, 1.1, 0.9, 1.2)
+#: Scales (of the map: the inverse of the edge length) tried after the retries when the size
+#: is the default one (no ``quads`` or ``edge_length``): quads of 0.7 and 0.5 times the mean
+#: edge length.  Finer grids leave more room between dense cones (``plane_holes.obj``: 27
+#: boundary loops and about 210 cones; its map stays folded at the default size and at 0.7,
+#: and unfolds at 0.5).
+_FINER_SCALES = (1 / 0.7, 2.0)
 
 
 @dataclass
@@ -186,7 +193,9 @@ def quad_mesh(
     lam : ``lambda_t`` of the soft alignment to the curvature (thesis 3.4)
     fix_flips : repair flipped triangles of the map (foldover-free iterations)
     retries : when the map stays folded, try again at up to this many other scales (x1.1,
-        x0.9, x1.2: other integers); the scale used is ``grid_map.scale``
+        x0.9, x1.2: other integers); with the default size (no ``quads`` or
+        ``edge_length``), then also with quads of 0.7 and 0.5 times the mean edge length (a
+        warning says so when one is used); the scale used is ``grid_map.scale``
 
     Returns
     -------
@@ -231,13 +240,22 @@ def quad_mesh(
     # a rounding that leaves the map folded somewhere is retried at slightly other scales
     # (other integers); the scale used is the map's ``scale``
     tries = []
-    for factor in _RETRY_SCALES[: max(1, retries + 1)]:
+    scales = _RETRY_SCALES[: max(1, retries + 1)]
+    if quads is None and edge_length is None and retries > 0:
+        scales += _FINER_SCALES
+    for factor in scales:
         grid = _grid_map64(
             verts.detach().double(), topo, z.to(torch.complex128), s * factor, True, fix_flips, 8, 1.0
         )
-        tries.append(f"{grid.flipped} at scale x{factor:g}")
+        tries.append(f"{grid.flipped} at scale x{factor:.3g}")
         if not grid.flipped:
             break
+    if not grid.flipped and factor in _FINER_SCALES:
+        warnings.warn(
+            f"quad_mesh: the integer-grid map stayed folded at the default size ({', '.join(tries[:-1])}); "
+            f"the quads are {1 / factor:.2g} times as long as the input's mean edge",
+            stacklevel=2,
+        )
     if grid.flipped:
         raise ValueError(
             f"the integer-grid map keeps folded triangles after repair ({', '.join(tries)}): no quad "
