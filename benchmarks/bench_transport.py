@@ -175,9 +175,8 @@ def main(argv=None) -> str:
         f"--thesis-levels {' '.join(map(str, args.thesis_levels))} "
         f"--timing-levels {' '.join(map(str, args.timing_levels))} --repeats {args.repeats}`.",
         f"Machine: {platform.processor() or platform.machine()}, torch {torch.__version__}, one thread "
-        "(`OMP_NUM_THREADS=1`, `torch.set_num_threads(1)`). Times are process CPU times: on the "
-        "shared, loaded machine the wall times follow its load (up to 15x the CPU time during "
-        "these runs); the ratios are medians of interleaved runs.",
+        "(`OMP_NUM_THREADS=1`, `torch.set_num_threads(1)`). Times are process CPU times (on a "
+        "shared machine the wall times follow its load); the ratios are medians of interleaved runs.",
         "",
         "norm: ||z(2 pi)||_M / ||z0||_M; err: relative M_z-norm error against the exact answer "
         "z0 exp(i n 2 pi cos theta) (backward transport turns the representation vector by "
