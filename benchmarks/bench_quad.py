@@ -5,6 +5,8 @@ Run from the repository root::
     pip install -r benchmarks/requirements-peers.txt     # pynanoinstantmeshes, libigl
     python benchmarks/bench_quad.py                      # the shared meshes + trimesh primitives
     python benchmarks/bench_quad.py --meshes bunny.obj --pictures docs/images
+    python benchmarks/bench_quad.py --fields curvature --out benchmarks/results/quad_holes \
+        --meshes "scipy holes 0" "scipy holes 1" "scipy holes 2" "scipy holes 3"
 
 For every mesh, ours runs first (``quad_mesh`` with its defaults: the curvature-aligned
 cross field, edge length = the input's mean edge length; also the smoothest field with
@@ -35,6 +37,7 @@ import contextlib
 import json
 import logging
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -81,9 +84,48 @@ def generated(name: str):
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
 
 
+def holes(seed: int, points: int = 3000, discs: int = 6):
+    """An open height field with holes that no tool of ours made: SciPy's Delaunay
+    triangulation of random points in a square (and on the circles of ``discs`` random discs),
+    the triangles inside the discs removed; the boundaries of the holes are jagged where a
+    random point lies close to a circle."""
+    import scipy.spatial
+
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-1, 1, (points, 2))
+    centres, radii = rng.uniform(-0.7, 0.7, (discs, 2)), rng.uniform(0.08, 0.15, discs)
+    keep = np.ones(len(pts), dtype=bool)
+    for c, r in zip(centres, radii):
+        keep &= np.linalg.norm(pts - c, axis=1) > r
+    rings = [
+        c + r * np.stack([np.cos(t), np.sin(t)], 1)
+        for c, r in zip(centres, radii)
+        for t in [np.linspace(0, 2 * np.pi, max(12, int(2 * np.pi * r / 0.04)), endpoint=False)]
+    ]
+    pts = np.concatenate([pts[keep], *rings])
+    tri = scipy.spatial.Delaunay(pts).simplices
+    centre = pts[tri].mean(1)
+    inside = np.zeros(len(tri), dtype=bool)
+    for c, r in zip(centres, radii):
+        inside |= np.linalg.norm(centre - c, axis=1) < r
+    tri = tri[~inside]
+    a = pts[tri]
+    d1, d2 = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+    area = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) / 2
+    tri = tri[area > 1e-6]  # slivers along the square's border
+    used = np.unique(tri)
+    remap = np.full(len(pts), -1)
+    remap[used] = np.arange(len(used))
+    pts, tri = pts[used], remap[tri]
+    z = 0.2 * np.sin(2 * pts[:, 0]) * np.cos(3 * pts[:, 1])
+    return np.column_stack([pts, z]), tri.astype(np.int64)
+
+
 def load(name: str):
     if name.startswith("trimesh "):
         return generated(name)
+    if name.startswith("scipy holes "):
+        return holes(int(name.split()[-1]))
     from torch_edgevf.io import load_mesh
 
     mesh = load_mesh(SHARED_MESHES / name)
@@ -258,7 +300,7 @@ def main(argv=None) -> int:
     out.with_suffix(".json").write_text(json.dumps({"machine": info, "records": records}, indent=1))
     text = (
         "# Quad meshes against Instant Meshes\n\n"
-        f"`python benchmarks/bench_quad.py {' '.join(argv or sys.argv[1:])}`\n\n"
+        f"`python benchmarks/bench_quad.py {shlex.join(argv or sys.argv[1:])}`\n\n"
         f"Machine: {info}\n\n" + markdown_table(header, rows) + "\n"
     )
     out.with_suffix(".md").write_text(text)
