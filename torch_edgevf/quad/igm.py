@@ -482,20 +482,26 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
         red, y, y_relaxed, err, steps, n_ind = _round_map(unk, A, rhs, extra)
         uv = corners(red.wedges(y))
         uv_relaxed = corners(red.wedges(y_relaxed))
-        new = _separation_rows(unk, uv, uv_relaxed, fl, paths)
-        if boundary is not None:
-            new = np.vstack([new, _boundary_rows(unk, uv, uv_relaxed, fl, cone, bnd_v & ~corner)])
+        pairs = _separation_rows(unk, uv, uv_relaxed, fl, paths)  # two rows per pair
+        off_line = (
+            _boundary_rows(unk, uv, uv_relaxed, fl, cone, bnd_v & ~corner)
+            if boundary is not None
+            else pairs[:0]
+        )
+        new = np.vstack([pairs, off_line])
         log.info(
-            "igm: %d cones, %d arcs, %d closures, %d separations, %d independent integers, "
-            "%d rounding steps, dependent integers off by %.2g; %d cone pairs collapsed",
+            "igm: %d cones, %d arcs, %d closures, %d separation rows, %d independent integers, "
+            "%d rounding steps, dependent integers off by %.2g; %d cone pairs collapsed, %d cones "
+            "on boundary lines",
             int(cone.sum()),
             unk.num_arcs,
             unk.K.shape[0] // 2,
-            extra.shape[0] // 2,
+            extra.shape[0],
             n_ind,
             steps,
             err,
-            new.shape[0] // 2,
+            pairs.shape[0] // 2,
+            off_line.shape[0],
         )
         if err > 1e-6:
             raise ValueError(
