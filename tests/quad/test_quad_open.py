@@ -152,3 +152,34 @@ def test_cones_are_kept_off_the_boundary_lines():
     uv = grid.uv.numpy()
     a, b = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     assert (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).min() > 0
+
+
+def jagged_holes(seed: int):
+    """SciPy's Delaunay triangulation of random points in a square and on the circles of six
+    random discs, the discs' triangles removed: holes with jagged boundaries."""
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-1, 1, (3000, 2))
+    centres, radii = rng.uniform(-0.7, 0.7, (6, 2)), rng.uniform(0.08, 0.15, 6)
+    for c, r in zip(centres, radii):
+        pts = pts[np.linalg.norm(pts - c, axis=1) > r]
+    t = [np.linspace(0, 2 * np.pi, max(12, int(2 * np.pi * r / 0.04)), endpoint=False) for r in radii]
+    pts = np.concatenate(
+        [pts] + [c + r * np.stack([np.cos(a), np.sin(a)], 1) for c, r, a in zip(centres, radii, t)]
+    )
+    tri = scipy.spatial.Delaunay(pts).simplices
+    centre = pts[tri].mean(1)
+    for c, r in zip(centres, radii):
+        tri = tri[np.linalg.norm(centre - c, axis=1) >= r]
+        centre = pts[tri].mean(1)
+    d1, d2 = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
+    tri = tri[np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]) > 2e-6]
+    used, tri = np.unique(tri, return_inverse=True)
+    pts = pts[used]
+    z = 0.2 * np.sin(2 * pts[:, 0]) * np.cos(3 * pts[:, 1])
+    return torch.tensor(np.column_stack([pts, z])), torch.tensor(tri.reshape(-1, 3), dtype=torch.int64)
+
+
+def test_a_soft_field_that_crosses_a_jagged_boundary_is_refused_by_name():
+    v, f = jagged_holes(0)
+    with pytest.raises(ValueError, match="too far from the boundary's directions.*boundary='hard'"):
+        quad_mesh(v, f, boundary="soft")

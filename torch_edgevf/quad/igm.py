@@ -456,6 +456,14 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
         boundary = (axes.faces, axes.corner_a, axes.corner_b, axes.axis)
     corner = bnd_v & (turns != 2)
     total = (wind[cone].sum() + (2 - turns[bnd_v]).sum()) / 4
+    if total != topo.euler_characteristic and boundary is not None:
+        # the turns at the boundary are right modulo 4; a field that crosses the boundary
+        # (soft alignment on a jagged boundary) can leave them a whole turn off
+        raise ValueError(
+            f"the field's cones and its turning along the boundary add up to {total:g}, not the "
+            f"Euler characteristic {topo.euler_characteristic}: the field is too far from the "
+            "boundary's directions (align it to the boundary: boundary='hard')"
+        )
     if total != topo.euler_characteristic:  # cannot happen: both count the turning of the field
         raise RuntimeError(f"the cones and boundary corners add up to {total}, not chi")
     comp = topo.components.numpy()
