@@ -7,6 +7,8 @@ Run from the repository root::
     python benchmarks/bench_quad.py --meshes bunny.obj --pictures docs/images
     python benchmarks/bench_quad.py --fields curvature --out benchmarks/results/quad_holes \
         --meshes "scipy holes 0" "scipy holes 1" "scipy holes 2" "scipy holes 3"
+    python benchmarks/bench_quad.py --fields curvature --boundary soft \
+        --out benchmarks/results/quad_holes_soft --meshes "scipy holes 0" ...
 
 For every mesh, ours runs first (``quad_mesh`` with its defaults: the curvature-aligned
 cross field, edge length = the input's mean edge length; also the smoothest field with
@@ -204,7 +206,7 @@ def measure(v, f, qv, qf, seconds):
     }
 
 
-def ours(v, f, field: str):
+def ours(v, f, field: str, boundary: str = "hard"):
     import torch
     from threadpoolctl import threadpool_limits
 
@@ -213,7 +215,7 @@ def ours(v, f, field: str):
     t0 = time.perf_counter()
     with threadpool_limits(limits=1):
         q = quad_mesh(
-            torch.from_numpy(v), torch.from_numpy(f), field=field, boundary="hard" if is_open(f) else None
+            torch.from_numpy(v), torch.from_numpy(f), field=field, boundary=boundary if is_open(f) else None
         )
     dt = time.perf_counter() - t0
     return q.verts.numpy(), q.quads.numpy(), dt, q
@@ -232,6 +234,7 @@ def main(argv=None) -> int:
         "--fields", nargs="*", default=["curvature", "smoothest"], choices=["curvature", "smoothest"]
     )
     p.add_argument("--out", default="benchmarks/results/quad")
+    p.add_argument("--boundary", default="hard", choices=["hard", "soft"], help="alignment on open meshes")
     p.add_argument("--pictures", default=None, help="folder for PNG pictures of both quad meshes")
     p.add_argument(
         "--picture-meshes", nargs="*", default=["spot_low_resolution.obj", "bunny.obj", "wingnut.obj"]
@@ -249,7 +252,7 @@ def main(argv=None) -> int:
         for field in args.fields:
             record = {"mesh": name, "input_vertices": len(v), "field": field}
             try:
-                qv, qf, dt, q = ours(v, f, field)
+                qv, qf, dt, q = ours(v, f, field, args.boundary)
                 made[field] = (qv, qf)
                 record["ours"] = measure(v, f, qv, qf, dt)
                 record["ours"]["cones"] = int(q.cone_index.numel())
