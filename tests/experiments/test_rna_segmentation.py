@@ -182,8 +182,9 @@ def test_the_recommended_network_is_the_one_its_first_run_trained():
     import torch_edgevf as ev
     from torch_edgevf.learning import MeshSample, collate_meshes, compute_operators, heat_kernel_signature
 
+    from study import variants  # the PSB study's modules, its folder on the path
+
     rna_run = load_script(RUN, "rna_run")
-    variants = load_script(RUN.parents[1] / "psb_classification" / "variants.py", "psb_variants")
     v, f = ev.icosphere(2)
     ops = compute_operators(v, f, k_edge=0, k_vertex=16)
     x = heat_kernel_signature(ops.vertex_evals, ops.vertex_evecs, count=16, log=True)
