@@ -261,18 +261,12 @@ def _matvec_add(a: sp.csr_matrix, x: np.ndarray, out: np.ndarray) -> None:
         out += a @ x
 
 
-def _apply_polynomial(coef, hK: sp.csr_matrix, y: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``p(hK) y`` for ``p`` of ``coef`` by Horner's rule, one sparse product per degree.
-
-    ``out`` (not ``y``): a buffer of ``y``'s shape for the result; without it one is made.
-    """
+def _apply_polynomial(coef, hK: sp.csr_matrix, y: np.ndarray) -> np.ndarray:
+    """``p(hK) y`` for ``p`` of ``coef`` by Horner's rule, one sparse product per degree."""
     y = np.ascontiguousarray(y, dtype=hK.dtype)
-    bufs = [np.empty_like(y), np.empty_like(y) if out is None else out]
-    # Horner's m = len(coef) - 1 steps alternate between the buffers and end in bufs[m % 2]
-    bufs = bufs if len(coef) % 2 == 0 else bufs[::-1]
-    u = np.multiply(y, coef[-1], out=bufs[0])
-    for i, c in enumerate(coef[-2::-1]):
-        nxt = np.multiply(y, c, out=bufs[(i + 1) % 2])
+    u = coef[-1] * y
+    for c in coef[-2::-1]:
+        nxt = np.multiply(y, c)
         _matvec_add(hK, u, nxt)
         u = nxt
     return u
@@ -411,11 +405,10 @@ class UpwindOperator:
         steps = self.num_steps(t)
         hK = K * (abs(t) / steps)
         y = self._inward(z.astype(np.complex128), +1 if not adjoint else -1)
-        prev, spare = y, np.empty_like(y)
+        prev = y
         for _ in range(steps):
-            # the state before the last step is kept; the one before it is overwritten
-            prev, y = y, _apply_polynomial(self.coefficients, hK, y, out=spare)
-            spare = prev
+            prev = y
+            y = _apply_polynomial(self.coefficients, hK, y)
         back = -1 if not adjoint else +1
         return self._outward(y, back), self._outward(prev, back)
 
