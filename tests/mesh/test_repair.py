@@ -181,6 +181,23 @@ def test_zero_area_cap_flipped_without_moving_vertices():
     assert tuple(sorted((int(a), int(b)))) not in edges
 
 
+@pytest.mark.parametrize("scale", [1e-170, 1e-100, 1.0, 1e100, 1e160])
+def test_zero_area_caps_found_at_every_scale(scale):
+    """The zero-area test is scale-free: at coordinates whose squares underflow or overflow
+    it finds the one cap, no other face, and warns of nothing."""
+    import warnings
+
+    from torch_edgevf.mesh.repair import find_degenerate_faces
+
+    v, f = _sphere(2)
+    assert find_degenerate_faces(v * scale, f).size == 0
+    v[int(f[0, 0])] = 0.5 * (v[f[0, 1]] + v[f[0, 2]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert find_degenerate_faces(v * scale, f).tolist() == [0]
+        assert ev.repair(v * scale, f).report.flipped_caps == [0]
+
+
 def test_zero_area_needle_mollified_without_moving_vertices():
     v, f = _sphere(2)
     # move a vertex onto its neighbour: a zero-length edge, no flip can help

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .degenerate import find_degenerate_faces
+from .degenerate import find_degenerate_faces, scaled_edges
 
 
 def flip_caps(v: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, list[int]]:
@@ -41,8 +41,7 @@ def flip_caps(v: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, list[int]]:
         if t in touched:
             continue
         f = faces[t]
-        p = v[f]
-        lengths = np.linalg.norm(p[[2, 0, 1]] - p[[1, 2, 0]], axis=1)  # opposite each corner
+        lengths = np.linalg.norm(scaled_edges(v[f][None])[0], axis=1)  # opposite each corner
         k = int(np.argmax(lengths))
         c, a, b = int(f[k]), int(f[(k + 1) % 3]), int(f[(k + 2) % 3])
         if lengths[(k + 1) % 3] == 0 or lengths[(k + 2) % 3] == 0:

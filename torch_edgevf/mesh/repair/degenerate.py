@@ -8,12 +8,21 @@ import torch
 from ..topology import Topology
 
 
+def scaled_edges(p: np.ndarray) -> np.ndarray:
+    """The edge vectors ``(F, 3, 3)`` of the triangles ``p`` ``(F, 3, 3)`` (edge ``k``
+    opposite corner ``k``), each triangle's scaled by a power of two near its largest
+    component: exact, and their products neither overflow nor underflow at any scale."""
+    e = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]
+    _, exponent = np.frexp(np.abs(e).max(axis=(1, 2)))
+    return np.ldexp(e, -exponent[:, None, None])
+
+
 def find_degenerate_faces(verts, faces) -> np.ndarray:
-    """Indices of the faces that the operators reject as zero-area (same criterion, float64)."""
+    """Indices of the faces that the operators reject as zero-area (same criterion, float64,
+    at any scale)."""
     v = np.asarray(verts, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    p = v[f]
-    e = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]
+    e = scaled_edges(v[f])
     lmax = np.linalg.norm(e, axis=2).max(1)
     double_area = np.linalg.norm(np.cross(e[:, 0], e[:, 1]), axis=1)
     return np.nonzero(double_area <= 8 * np.finfo(np.float64).eps * lmax * lmax)[0]
