@@ -55,6 +55,8 @@ CASES = {
     # a soft field whose turns along the jagged boundary do not add up with the nearest
     # labels; they do with short edges turned across the field
     "jagged holes (seed 0) soft": (lambda: jagged_holes(0), "curvature", "soft"),
+    # an ear (a boundary vertex of one triangle) that the soft field would make straight
+    "jagged holes (seed 1) soft": (lambda: jagged_holes(1), "curvature", "soft"),
 }
 
 

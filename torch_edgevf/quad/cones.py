@@ -315,6 +315,7 @@ def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None
     rho = r - np.rint(r)  # the edge's angle to the nearest axis, in quarter turns
     label = np.mod(np.rint(r).astype(np.int64), 4)
     nearest = np.zeros(bnd_e.size, dtype=np.int64)  # turns at each edge's start, unclamped
+    fan = np.zeros(bnd_e.size, dtype=np.int64)  # triangles at each edge's start
     v_np = verts.numpy() if hasattr(verts, "numpy") else np.asarray(verts)
     axis = 1 - label % 2  # the coordinate constant along the edge
     # quarter turns at the boundary vertices
@@ -331,6 +332,7 @@ def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None
         shift, rot, angle_sum = 0, 0.0, 0.0
         while True:
             angle_sum += alpha[face, corner]
+            fan[i_out] += 1
             if face == f[i_in] and corner == kb[i_in]:
                 break
             e = int(fe[face, (corner + 1) % 3])  # the edge (v, next vertex of the fan)
@@ -353,7 +355,7 @@ def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None
         from .corners import boundary_loops, relabel_loops
 
         length = np.linalg.norm(v_np[b] - v_np[a], axis=1) * scale
-        delta, n = relabel_loops(boundary_loops(a, b), nearest, length, rho)
+        delta, n = relabel_loops(boundary_loops(a, b), nearest, length, rho, fan)
         changed = np.flatnonzero(delta != 0)
         label[changed] = (label[changed] + delta[changed]) % 4
         axis = 1 - label % 2
