@@ -47,6 +47,16 @@ CASES = {
     "disk": (wavy_disk, "smoothest", "hard"),
     "disk soft": (wavy_disk, "curvature", "soft"),
     "annulus (trimesh)": (annulus, "smoothest", "hard"),
+    # a concave and a convex corner 0.4 quads apart on a hole's jagged boundary: meshed with
+    # the short edge between them turned across the field (torch_edgevf.quad.corners)
+    "jagged holes (seed 2)": (lambda: jagged_holes(2), "curvature", "hard"),
+    # two holes of one triangle each, a quarter of a quad long: slits two quads long
+    "jagged holes (seed 1)": (lambda: jagged_holes(1), "curvature", "hard"),
+    # a soft field whose turns along the jagged boundary do not add up with the nearest
+    # labels; they do with short edges turned across the field
+    "jagged holes (seed 0) soft": (lambda: jagged_holes(0), "curvature", "soft"),
+    # an ear (a boundary vertex of one triangle) that the soft field would make straight
+    "jagged holes (seed 1) soft": (lambda: jagged_holes(1), "curvature", "soft"),
 }
 
 
@@ -180,6 +190,15 @@ def jagged_holes(seed: int):
 
 
 def test_a_soft_field_that_crosses_a_jagged_boundary_is_refused_by_name():
+    """Without turning boundary edges across the field (``quad_mesh`` tries that too), the
+    turns of the field along a jagged boundary need not add up to the Euler characteristic."""
+    from torch_edgevf.quad.igm import integer_grid_map
+    from torch_edgevf.quad.mesh import _design, sharp_edges
+
     v, f = jagged_holes(0)
+    topo = Topology(f, v.shape[0])
+    e = v[topo.edges]
+    h = float((e[:, 1] - e[:, 0]).norm(dim=1).mean())
+    z = _design(v, topo, "curvature", sharp_edges(v, topo, 60.0), "soft", 0.0)
     with pytest.raises(ValueError, match="too far from the boundary's directions.*boundary='hard'"):
-        quad_mesh(v, f, boundary="soft")
+        integer_grid_map(v, topo, z, scale=1.0 / h)

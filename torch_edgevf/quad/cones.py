@@ -289,9 +289,10 @@ class BoundaryAxes:
     corner_b: np.ndarray
     axis: np.ndarray
     turns: np.ndarray
+    relabelled: bool = False
 
 
-def boundary_axes(verts, topo: Topology, field: CombedField) -> BoundaryAxes:
+def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None = None) -> BoundaryAxes:
     """Label every boundary edge by the chart axis it follows, and count the quarter turns
     at every boundary vertex (:class:`BoundaryAxes`).
 
@@ -310,7 +311,12 @@ def boundary_axes(verts, topo: Topology, field: CombedField) -> BoundaryAxes:
     ka, kb = (k + 1) % 3, (k + 2) % 3
     a, b = fl[f, ka], fl[f, kb]
     phi = theta[f, k] + np.where(a < b, 0.0, math.pi)
-    label = np.mod(np.rint((phi - field.angle[f]) / _QUARTER).astype(np.int64), 4)
+    r = (phi - field.angle[f]) / _QUARTER
+    rho = r - np.rint(r)  # the edge's angle to the nearest axis, in quarter turns
+    label = np.mod(np.rint(r).astype(np.int64), 4)
+    nearest = np.zeros(bnd_e.size, dtype=np.int64)  # turns at each edge's start, unclamped
+    fan = np.zeros(bnd_e.size, dtype=np.int64)  # triangles at each edge's start
+    v_np = verts.numpy() if hasattr(verts, "numpy") else np.asarray(verts)
     axis = 1 - label % 2  # the coordinate constant along the edge
     # quarter turns at the boundary vertices
     from ..mesh.geometry import corner_angles
@@ -326,6 +332,7 @@ def boundary_axes(verts, topo: Topology, field: CombedField) -> BoundaryAxes:
         shift, rot, angle_sum = 0, 0.0, 0.0
         while True:
             angle_sum += alpha[face, corner]
+            fan[i_out] += 1
             if face == f[i_in] and corner == kb[i_in]:
                 break
             e = int(fe[face, (corner + 1) % 3])  # the edge (v, next vertex of the fan)
@@ -342,4 +349,16 @@ def boundary_axes(verts, topo: Topology, field: CombedField) -> BoundaryAxes:
         estimate = (angle_sum - rot) / _QUARTER
         options = [m + 4 * j for j in range(3) if m + 4 * j >= 1]
         turns[v] = min(options, key=lambda n: abs(n - estimate))
-    return BoundaryAxes(f, ka, kb, axis, turns)
+        nearest[i_out] = min((m + 4 * j for j in range(-1, 3)), key=lambda n: abs(n - estimate))
+    relabelled = False
+    if scale is not None:
+        from .corners import boundary_loops, relabel_loops
+
+        length = np.linalg.norm(v_np[b] - v_np[a], axis=1) * scale
+        delta, n = relabel_loops(boundary_loops(a, b), nearest, length, rho, fan)
+        changed = np.flatnonzero(delta != 0)
+        label[changed] = (label[changed] + delta[changed]) % 4
+        axis = 1 - label % 2
+        turns[a] = np.where(n >= 1, n, turns[a])  # a loop left with 0 turns: as before
+        relabelled = bool(changed.size)
+    return BoundaryAxes(f, ka, kb, axis, turns, relabelled)

@@ -28,7 +28,10 @@ Steps (:func:`integer_grid_map`):
    problem in ``y_ind``;
 5. *greedy rounding with re-solves* [BZK09]: the cone positions first, then the arc
    translations, each time the unknown closest to an integer is fixed and the rest re-solved;
-   the dependent integers follow and are checked to be integers;
+   the dependent integers follow and are checked to be integers; where the rounding puts
+   close cones or corners at one point, a cone on a boundary line, or the tips of a slit (a
+   hole of one triangle, mapped to a slit) less than two units apart, it is re-run with
+   those held apart;
 6. the free masters are solved with the integers fixed; flipped triangles, if any, are
    removed by local stiffening [BZK09] (re-solves with the distorted triangles' weights
    raised), then if needed by a few iterations of a foldover-free energy ([GKK+21] "Foldover-free maps in
@@ -341,6 +344,68 @@ def _boundary_rows(unk: Unknowns, uv, uv_relaxed, fl, cone, on_line):
     return np.vstack(rows) if rows else np.zeros((0, unk.K.shape[1]))
 
 
+def _slits(boundary, turns: np.ndarray, fl: np.ndarray):
+    """The holes of one triangle mapped to a slit: a boundary loop of three edges with 4, 4
+    and 2 quarter turns. Per slit, its two sides from one tip to the other as paths ``(a,
+    f1, c, f2, b)`` (:func:`_cone_paths`), the edge between the tips first, and the chart
+    coordinate of its face along the slit."""
+    from .corners import boundary_loops
+
+    bf, ka, kb, axis = boundary
+    a, b = fl[bf, ka], fl[bf, kb]
+    out = []
+    for loop in boundary_loops(a, b):
+        if loop.size != 3 or sorted(turns[a[loop]].tolist()) != [2, 4, 4]:
+            continue
+        k = next(k for k in range(3) if turns[b[loop[k]]] == 2)
+        i, m, o = (int(loop[(k + q) % 3]) for q in range(3))  # tip -> middle -> tip -> tip
+        direct = (int(a[o]), int(bf[o]), int(b[o]), int(bf[o]), int(b[o]))
+        other = (int(b[m]), int(bf[m]), int(a[m]), int(bf[i]), int(a[i]))
+        out.append((direct, other, 1 - int(axis[o])))
+    return out
+
+
+def _path_form(unk: Unknowns, fl, path):
+    """``W_b - W_a`` along ``path = (a, f1, c, f2, b)`` in the chart of ``f1`` (the rigid
+    motion of :func:`_separation_rows` across ``c``): a function of a per-corner map, the
+    (2, ny) integer form, and the wedge of ``a`` in ``f1``."""
+    a, f1, c, f2, b = path
+    n = unk.ncls
+    Qd = unk.Q.tocsr()
+    ka, kc1, kc2, kb = (int(np.flatnonzero(fl[f] == v)[0]) for f, v in ((f1, a), (f1, c), (f2, c), (f2, b)))
+    w_a, w_c1, w_c2, w_b = unk.wedge[f1, ka], unk.wedge[f1, kc1], unk.wedge[f2, kc2], unk.wedge[f2, kb]
+    R = _rot(int(unk.rho[w_c1] - unk.rho[w_c2]))
+
+    def offset(m):
+        return R @ (m[f2, kb] - m[f2, kc2]) + m[f1, kc1] - m[f1, ka]
+
+    def q_of(w):
+        return np.vstack([Qd[w].toarray(), Qd[n + w].toarray()])
+
+    return offset, R @ (q_of(w_b) - q_of(w_c2)) + q_of(w_c1) - q_of(w_a), w_a
+
+
+def _slit_rows(unk: Unknowns, uv, uv_relaxed, fl, slits):
+    """Constraints that open the slits (:func:`_slits`) to two units: a slit of one unit
+    would join its two tips by two quad edges. For every slit that the rounded map makes
+    shorter than two units on either side, ``W_b - W_a = D`` along both sides, ``D`` two
+    units along the slit with the sign of the relaxed map's offset along the tips' edge, in
+    the chart of the tip ``a`` on that side (both sides leave ``a`` along one ray: it has 4
+    quarter turns). Integer unknowns only: the tips are corners."""
+    rows = []
+    for direct, other, j in slits:
+        off1, form1, w1 = _path_form(unk, fl, direct)
+        off2, form2, w2 = _path_form(unk, fl, other)
+        if abs(off1(uv)[j]) >= 2 and np.abs(off2(uv)).max() >= 2:
+            continue
+        d1 = np.zeros(2)
+        d1[j] = 2.0 if off1(uv_relaxed)[j] >= 0 else -2.0
+        d2 = _rot(int(unk.rho[w2] - unk.rho[w1])) @ d1
+        rows.append(np.column_stack([form1, -d1]))
+        rows.append(np.column_stack([form2, -d2]))
+    return np.vstack(rows) if rows else np.zeros((0, unk.K.shape[1]))
+
+
 def _round_map(unk: Unknowns, A, rhs, extra_rows):
     """Eliminate, reduce and round; the integers ``y`` (exact) and the relaxed ones."""
     K = np.vstack([unk.K, extra_rows]) if extra_rows.size else unk.K
@@ -379,7 +444,9 @@ def integer_grid_map(
     fix_flips : run the foldover-free iterations when the rounded map flips triangles
     separate_cones : at most this many rounds of re-rounding with close cones that the
         rounding put at one point held one unit apart, and cones that it put on the line of
-        a neighbouring straight stretch of a hard boundary held one unit off it
+        a neighbouring straight stretch of a hard boundary held one unit off it, and the
+        tips of a slit (a hole of one triangle with 4, 4 and 2 quarter turns) held two
+        units apart on both sides (one unit would join them by two quad edges)
     dipoles : pairs of cones of opposite index closer than this many target quad edges
         (``dipoles / s``) are removed (:func:`torch_edgevf.quad.cones.cancel_dipoles`): the
         quad mesh cannot resolve them; 0 keeps every cone of the field
@@ -396,7 +463,17 @@ def integer_grid_map(
 def _grid_map64(verts, faces, z, scale, split, fix_flips, separate_cones, dipoles) -> IntegerGridMap:
     """The map in float64 (what the quad extraction needs: exact integers, snapped free values)."""
     with threadpool_limits(limits=1):  # small dense problems: threads only contend
-        return _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, dipoles)
+        grid = _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, dipoles)
+    assert grid is not None  # only a relabelled map can be None
+    return grid
+
+
+def _relabelled_map64(verts, faces, z, scale, fix_flips) -> IntegerGridMap | None:
+    """:func:`_grid_map64` (default options) with the short boundary edges of stairs and of
+    corners closer than a quad turned across the field (:mod:`torch_edgevf.quad.corners`);
+    ``None`` when no edge is turned (the map would be the one without it)."""
+    with threadpool_limits(limits=1):
+        return _integer_grid_map(verts, faces, z, scale, True, fix_flips, 8, 1.0, relabel=True)
 
 
 def with_dtype(grid: IntegerGridMap, dtype: torch.dtype) -> IntegerGridMap:
@@ -409,7 +486,9 @@ def with_dtype(grid: IntegerGridMap, dtype: torch.dtype) -> IntegerGridMap:
     )
 
 
-def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, dipoles) -> IntegerGridMap:
+def _integer_grid_map(
+    verts, faces, z, scale, split, fix_flips, separate_cones, dipoles, relabel=False
+) -> IntegerGridMap | None:
     verts, topo = topology_and_verts(verts, faces)
     z = as_edge_field(z, topo, verts)
     if z.dim() != 1:
@@ -451,9 +530,13 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
     turns = np.zeros(topo.num_vertices, dtype=np.int64)
     boundary = None
     if bnd_v.any():
-        axes = boundary_axes(verts, topo, field)
+        axes = boundary_axes(verts, topo, field, s if relabel else None)
+        if relabel and not axes.relabelled:
+            return None
         turns = axes.turns
         boundary = (axes.faces, axes.corner_a, axes.corner_b, axes.axis)
+    elif relabel:
+        return None
     corner = bnd_v & (turns != 2)
     total = (wind[cone].sum() + (2 - turns[bnd_v]).sum()) / 4
     if total != topo.euler_characteristic and boundary is not None:
@@ -484,7 +567,10 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
     def corners(W):
         return np.stack([W[: unk.ncls][unk.wedge], W[unk.ncls :][unk.wedge]], -1)
 
-    paths = _cone_paths(fl, cone | corner)
+    slits = _slits(boundary, turns, fl) if boundary is not None else []
+    tips = {frozenset((p[0], p[4])) for p, _, _ in slits}
+    # the tips of a slit are held two units apart by their own constraint
+    paths = [p for p in _cone_paths(fl, cone | corner) if frozenset((p[0], p[4])) not in tips]
     extra = np.zeros((0, unk.K.shape[1]))
     for attempt in range(separate_cones + 1):
         red, y, y_relaxed, err, steps, n_ind = _round_map(unk, A, rhs, extra)
@@ -496,7 +582,7 @@ def _integer_grid_map(verts, faces, z, scale, split, fix_flips, separate_cones, 
             if boundary is not None
             else pairs[:0]
         )
-        new = np.vstack([pairs, off_line])
+        new = np.vstack([pairs, off_line, _slit_rows(unk, uv, uv_relaxed, fl, slits)])
         log.info(
             "igm: %d cones, %d arcs, %d closures, %d separation rows, %d independent integers, "
             "%d rounding steps, dependent integers off by %.2g; %d cone pairs collapsed, %d cones "

@@ -9,7 +9,9 @@
    (:mod:`torch_edgevf.quad.field`): a sphere gets the smoothest field's 8 cones, not the
    noise of its curvature directions;
 2. its integer-grid map (:mod:`torch_edgevf.quad.igm`): cones at integer points, integer
-   seam translations, no flipped triangle;
+   seam translations, no flipped triangle; on open meshes every boundary edge on an integer
+   iso-line, a few short ones of a jagged boundary turned across the field where that
+   spares a stair of corners closer than a quad (:mod:`torch_edgevf.quad.corners`);
 3. the quads of the map's integer iso-lines (:mod:`torch_edgevf.quad.extract`).
 
 The quad mesh is pure (quads only), manifold, closed where the input is, has the input's
@@ -33,7 +35,7 @@ from ..mesh.geometry import dihedral_angles
 from ..mesh.topology import Topology
 from .extract import extract_quads
 from .field import curvature_guide
-from .igm import IntegerGridMap, _grid_map64, with_dtype
+from .igm import IntegerGridMap, _grid_map64, _relabelled_map64, with_dtype
 
 __all__ = ["QuadMesh", "quad_mesh", "quad_mesh_report", "QuadMeshReport", "sharp_edges", "save_quad_mesh"]
 
@@ -192,7 +194,11 @@ def quad_mesh(
         ``"soft"`` (strongly guided along them)
     lam : ``lambda_t`` of the soft alignment to the curvature (thesis 3.4)
     fix_flips : repair flipped triangles of the map (foldover-free iterations)
-    retries : when the map stays folded, try again at up to this many other scales (x1.1,
+    retries : on an open mesh whose map is folded, or whose field's turns along the boundary
+        do not add up, the map is made again with the short boundary edges of stairs and of
+        corners closer than a quad turned across the field
+        (:mod:`torch_edgevf.quad.corners`), and the less folded one kept, at every scale;
+        when the map stays folded, try again at up to this many other scales (x1.1,
         x0.9, x1.2: other integers); with the default size (no ``quads`` or
         ``edge_length``), then also with quads of 0.7 and 0.5 times the mean edge length (a
         warning says so when one is used); the scale used is ``grid_map.scale``
@@ -243,10 +249,9 @@ def quad_mesh(
     scales = _RETRY_SCALES[: max(1, retries + 1)]
     if quads is None and edge_length is None and retries > 0:
         scales += _FINER_SCALES
+    v64, z128 = verts.detach().double(), z.to(torch.complex128)
     for factor in scales:
-        grid = _grid_map64(
-            verts.detach().double(), topo, z.to(torch.complex128), s * factor, True, fix_flips, 8, 1.0
-        )
+        grid = _map_at(v64, topo, z128, s * factor, fix_flips, topo.is_closed)
         tries.append(f"{grid.flipped} at scale x{factor:.3g}")
         if not grid.flipped:
             break
@@ -277,6 +282,27 @@ def quad_mesh(
         field=z.to(complex_dtype(verts.dtype)),
         grid_map=with_dtype(grid, verts.dtype),
     )
+
+
+def _map_at(verts, topo, z, scale: float, fix_flips: bool, closed: bool) -> IntegerGridMap:
+    """The integer-grid map at ``scale``; on an open mesh where it is folded, or where the
+    field's turns along the boundary do not add up, the one with the short boundary edges of
+    stairs and of close corners turned across the field instead
+    (:mod:`torch_edgevf.quad.corners`), if that is less folded."""
+    try:
+        grid = _grid_map64(verts, topo, z, scale, True, fix_flips, 8, 1.0)
+    except ValueError:  # the turns along the boundary do not add up (a soft field)
+        if closed:
+            raise
+        other = _relabelled_map64(verts, topo, z, scale, fix_flips)
+        if other is None:
+            raise
+        return other
+    if grid.flipped and not closed:
+        other = _relabelled_map64(verts, topo, z, scale, fix_flips)
+        if other is not None and other.flipped < grid.flipped:
+            return other
+    return grid
 
 
 def topo_boundary_corners(grid: IntegerGridMap, turns: np.ndarray) -> np.ndarray:
