@@ -52,6 +52,10 @@ CASES = {
     "jagged holes (seed 2)": (lambda: jagged_holes(2), "curvature", "hard"),
     # two holes of one triangle each, a quarter of a quad long: slits two quads long
     "jagged holes (seed 1)": (lambda: jagged_holes(1), "curvature", "hard"),
+    # a +1/4, -1/4 pair in the triangles of an ear, next to three corners 0.6 and 0.4 quads
+    # apart: meshed with the field made again, free on the boundary edges of its singular
+    # triangles
+    "jagged holes (seed 0)": (lambda: jagged_holes(0), "curvature", "hard"),
     # a soft field whose turns along the jagged boundary do not add up with the nearest
     # labels; they do with short edges turned across the field
     "jagged holes (seed 0) soft": (lambda: jagged_holes(0), "curvature", "soft"),

@@ -126,14 +126,16 @@ def _scale(verts, topo, quads, edge_length) -> float:
     return 1.0 / float((e[:, 1] - e[:, 0]).norm(dim=1).mean())
 
 
-def _design(verts, topo, field, sharp, boundary, lam):
+def _design(verts, topo, field, sharp, boundary, lam, free=None):
+    """The cross field; ``free``: boundary edges left out of a hard boundary's constraint."""
     from ..fields.design import FieldDesigner
 
     designer = FieldDesigner(verts.detach().double(), topo, n=4)
     bnd = torch.nonzero(topo.boundary_edges).flatten()
     hard = sharp
     if boundary == "hard":
-        hard = torch.cat([hard, bnd])
+        kept = bnd if free is None else bnd[~torch.isin(bnd, free)]
+        hard = torch.cat([hard, kept])
     guide = None
     if field == "curvature":  # curvature where anisotropic, smoothest elsewhere (.field)
         smooth = None
@@ -201,7 +203,11 @@ def quad_mesh(
         when the map stays folded, try again at up to this many other scales (x1.1,
         x0.9, x1.2: other integers); with the default size (no ``quads`` or
         ``edge_length``), then also with quads of 0.7 and 0.5 times the mean edge length (a
-        warning says so when one is used); the scale used is ``grid_map.scale``
+        warning says so when one is used); the scale used is ``grid_map.scale``. With
+        ``boundary="hard"`` and a field made here (not a given tensor), when the map is
+        folded at every size, the field is made again without the constraint on the
+        boundary edges of the triangles that hold its singularities (cones next to the
+        boundary, where the map has no room for them), and every size tried again
 
     Returns
     -------
@@ -245,16 +251,21 @@ def quad_mesh(
         z = _check_field(field, topo, verts)
     # a rounding that leaves the map folded somewhere is retried at slightly other scales
     # (other integers); the scale used is the map's ``scale``
-    tries = []
     scales = _RETRY_SCALES[: max(1, retries + 1)]
     if quads is None and edge_length is None and retries > 0:
         scales += _FINER_SCALES
-    v64, z128 = verts.detach().double(), z.to(torch.complex128)
-    for factor in scales:
-        grid = _map_at(v64, topo, z128, s * factor, fix_flips, topo.is_closed)
-        tries.append(f"{grid.flipped} at scale x{factor:.3g}")
-        if not grid.flipped:
-            break
+    v64 = verts.detach().double()
+    grid, factor, tries = _try_scales(v64, topo, z, s, scales, fix_flips)
+    free = None
+    if grid.flipped and retries > 0 and boundary == "hard" and isinstance(field, str) and not topo.is_closed:
+        free = _singular_boundary_edges(v64, topo, z)
+    if free is not None and free.numel():
+        # the field made again without the constraint on the boundary edges of the triangles
+        # that hold its singularities: held along those edges, it turns inside the triangles
+        # at the boundary, where the map has no room for its cones
+        z = _design(verts, topo, field, sharp, boundary, lam, free=free)
+        grid, factor, more = _try_scales(v64, topo, z, s, scales, fix_flips)
+        tries += [f"{t} (the boundary edges of singular triangles free)" for t in more]
     if not grid.flipped and factor in _FINER_SCALES:
         warnings.warn(
             f"quad_mesh: the integer-grid map stayed folded at the default size ({', '.join(tries[:-1])}); "
@@ -282,6 +293,28 @@ def quad_mesh(
         field=z.to(complex_dtype(verts.dtype)),
         grid_map=with_dtype(grid, verts.dtype),
     )
+
+
+def _try_scales(v64, topo, z, s, scales, fix_flips):
+    """The map at the first of ``s * scales`` where it is not folded (else at the last), its
+    factor, and the folds at each scale tried."""
+    tries = []
+    z128 = z.to(torch.complex128)
+    for factor in scales:
+        grid = _map_at(v64, topo, z128, s * factor, fix_flips, topo.is_closed)
+        tries.append(f"{grid.flipped} at scale x{factor:.3g}")
+        if not grid.flipped:
+            break
+    return grid, factor, tries
+
+
+def _singular_boundary_edges(verts, topo: Topology, z) -> torch.Tensor:
+    """The boundary edges of the triangles that hold a singularity of the cross field ``z``."""
+    from ..fields.singularities import singularities
+
+    faces = singularities(verts, topo, z, n=4).singular_faces
+    edges = topo.face_edges[faces].flatten()
+    return torch.unique(edges[topo.boundary_edges[edges]])
 
 
 def _map_at(verts, topo, z, scale: float, fix_flips: bool, closed: bool) -> IntegerGridMap:
