@@ -316,7 +316,6 @@ def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None
     label = np.mod(np.rint(r).astype(np.int64), 4)
     nearest = np.zeros(bnd_e.size, dtype=np.int64)  # turns at each edge's start, unclamped
     fan = np.zeros(bnd_e.size, dtype=np.int64)  # triangles at each edge's start
-    v_np = verts.numpy() if hasattr(verts, "numpy") else np.asarray(verts)
     axis = 1 - label % 2  # the coordinate constant along the edge
     # quarter turns at the boundary vertices
     from ..mesh.geometry import corner_angles
@@ -354,6 +353,7 @@ def boundary_axes(verts, topo: Topology, field: CombedField, scale: float | None
     if scale is not None:
         from .corners import boundary_loops, relabel_loops
 
+        v_np = verts.numpy() if hasattr(verts, "numpy") else np.asarray(verts)
         length = np.linalg.norm(v_np[b] - v_np[a], axis=1) * scale
         delta, n = relabel_loops(boundary_loops(a, b), nearest, length, rho, fan)
         changed = np.flatnonzero(delta != 0)

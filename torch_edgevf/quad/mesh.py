@@ -301,7 +301,7 @@ def _try_scales(v64, topo, z, s, scales, fix_flips):
     tries = []
     z128 = z.to(torch.complex128)
     for factor in scales:
-        grid = _map_at(v64, topo, z128, s * factor, fix_flips, topo.is_closed)
+        grid = _map_at(v64, topo, z128, s * factor, fix_flips)
         tries.append(f"{grid.flipped} at scale x{factor:.3g}")
         if not grid.flipped:
             break
@@ -317,11 +317,12 @@ def _singular_boundary_edges(verts, topo: Topology, z) -> torch.Tensor:
     return torch.unique(edges[topo.boundary_edges[edges]])
 
 
-def _map_at(verts, topo, z, scale: float, fix_flips: bool, closed: bool) -> IntegerGridMap:
+def _map_at(verts, topo: Topology, z, scale: float, fix_flips: bool) -> IntegerGridMap:
     """The integer-grid map at ``scale``; on an open mesh where it is folded, or where the
     field's turns along the boundary do not add up, the one with the short boundary edges of
     stairs and of close corners turned across the field instead
     (:mod:`torch_edgevf.quad.corners`), if that is less folded."""
+    closed = topo.is_closed
     try:
         grid = _grid_map64(verts, topo, z, scale, True, fix_flips, 8, 1.0)
     except ValueError:  # the turns along the boundary do not add up (a soft field)
